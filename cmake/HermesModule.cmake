@@ -1,0 +1,49 @@
+# hermes_module(NAME <lib> DIR <dir> [DEPS <targets...>])
+# Builds a shared library from <dir>/src/*.cc (public headers in <dir>/include),
+# one executable per <dir>/tools/*.cc (named hermes_<stem>), and one GoogleTest
+# executable per <dir>/test/test_*.cc (linked with <dir>/test/support/*.cc if any).
+# Sources are globbed, so adding a file needs no CMake edit (re-run cmake).
+function(hermes_module)
+  cmake_parse_arguments(M "" "NAME;DIR" "DEPS" ${ARGN})
+  file(GLOB_RECURSE srcs CONFIGURE_DEPENDS ${M_DIR}/src/*.cc)
+  add_library(${M_NAME} SHARED ${srcs})
+  target_include_directories(${M_NAME} PUBLIC
+    $<BUILD_INTERFACE:${M_DIR}/include>)
+  target_link_libraries(${M_NAME} PUBLIC ${M_DEPS})
+  set_target_properties(${M_NAME} PROPERTIES
+    LIBRARY_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/lib)
+
+  file(GLOB tools CONFIGURE_DEPENDS ${M_DIR}/tools/*.cc)
+  foreach(tool ${tools})
+    get_filename_component(stem ${tool} NAME_WE)
+    add_executable(hermes_${stem} ${tool})
+    target_link_libraries(hermes_${stem} PRIVATE ${M_NAME})
+    set_target_properties(hermes_${stem} PROPERTIES
+      RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/bin)
+  endforeach()
+
+  if(HERMES_BUILD_TESTS)
+    file(GLOB support CONFIGURE_DEPENDS ${M_DIR}/test/support/*.cc)
+    if(support)
+      add_library(${M_NAME}_testsupport STATIC ${support})
+      target_include_directories(${M_NAME}_testsupport PUBLIC ${M_DIR}/test/support)
+      target_link_libraries(${M_NAME}_testsupport PUBLIC ${M_NAME} GTest::gtest)
+    endif()
+    file(GLOB tests CONFIGURE_DEPENDS ${M_DIR}/test/test_*.cc)
+    foreach(t ${tests})
+      get_filename_component(stem ${t} NAME_WE)
+      set(exe ${M_NAME}_${stem})
+      add_executable(${exe} ${t})
+      target_link_libraries(${exe} PRIVATE ${M_NAME} GTest::gtest_main)
+      if(support)
+        target_link_libraries(${exe} PRIVATE ${M_NAME}_testsupport)
+      endif()
+      target_compile_definitions(${exe} PRIVATE
+        HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
+        HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data")
+      set_target_properties(${exe} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/test_bin)
+      gtest_discover_tests(${exe} TEST_PREFIX "${M_NAME}." DISCOVERY_TIMEOUT 60
+        PROPERTIES LABELS "unit")
+    endforeach()
+  endif()
+endfunction()
