@@ -6,6 +6,10 @@
 function(hermes_module)
   cmake_parse_arguments(M "" "NAME;DIR" "DEPS" ${ARGN})
   file(GLOB_RECURSE srcs CONFIGURE_DEPENDS ${M_DIR}/src/*.cc)
+  if(NOT srcs)  # a module that has no sources yet still yields a linkable library
+    set(srcs ${CMAKE_CURRENT_BINARY_DIR}/${M_NAME}_empty.cc)
+    file(WRITE ${srcs} "namespace hermes { void ${M_NAME}_empty() {} }\n")
+  endif()
   add_library(${M_NAME} SHARED ${srcs})
   target_include_directories(${M_NAME} PUBLIC
     $<BUILD_INTERFACE:${M_DIR}/include>)
