@@ -1,0 +1,99 @@
+#include "hermes/agent/bandwidth_monitor.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace hermes::agent {
+
+Status BandwidthMonitorParams::read(const Config& c) {
+  for (auto [key, field] : {std::pair{"uplink.monitor.window_s", &window_s},
+                            std::pair{"uplink.monitor.decay_tau_s", &decay_tau_s},
+                            std::pair{"uplink.monitor.outage_timeout_s", &outage_timeout_s},
+                            std::pair{"uplink.monitor.probe_factor", &probe_factor},
+                            std::pair{"uplink.monitor.initial_bps", &initial_bps}}) {
+    if (Status s = c.get(key, field); !s) return s;
+  }
+  return validate();
+}
+
+Status BandwidthMonitorParams::validate() const {
+  if (!(window_s > 0)) return Error{"uplink.monitor.window_s must be > 0"};
+  if (!(decay_tau_s > 0)) return Error{"uplink.monitor.decay_tau_s must be > 0"};
+  if (!(outage_timeout_s > 0)) return Error{"uplink.monitor.outage_timeout_s must be > 0"};
+  if (!(probe_factor >= 1.0)) return Error{"uplink.monitor.probe_factor must be >= 1"};
+  if (!(initial_bps > 0)) return Error{"uplink.monitor.initial_bps must be > 0"};
+  return Status::Ok();
+}
+
+void BandwidthMonitorParams::write(ConfigWriter& w) const {
+  w.set("uplink.monitor.window_s", window_s);
+  w.set("uplink.monitor.decay_tau_s", decay_tau_s);
+  w.set("uplink.monitor.outage_timeout_s", outage_timeout_s);
+  w.set("uplink.monitor.probe_factor", probe_factor);
+  w.set("uplink.monitor.initial_bps", initial_bps);
+}
+
+BandwidthMonitor::BandwidthMonitor(BandwidthMonitorParams p) : p_(p) {
+  HERMES_CHECK(p_.validate().ok(), p_.validate().error());
+}
+
+void BandwidthMonitor::onSend(std::uint64_t id, std::size_t bytes, double t) {
+  outstanding_[id] = {bytes, t};
+}
+
+void BandwidthMonitor::onGiveUp(std::uint64_t id) { outstanding_.erase(id); }
+
+void BandwidthMonitor::onAck(std::uint64_t id, double t) {
+  auto it = outstanding_.find(id);
+  if (it == outstanding_.end()) return;
+  // While the link is busy, this message's transfer began when the previous
+  // one was acknowledged, not when it was queued.
+  const double start = std::max(it->second.sent, last_ack_);
+  const double dt = t - start;
+  if (dt > 1e-6) {
+    const double bps = static_cast<double>(it->second.bytes) / dt;
+    samples_.push_back({t, bps});
+    last_sample_bps_ = bps;
+    last_sample_t_ = t;
+    ++sample_count_;
+    while (!samples_.empty() && samples_.front().t < t - p_.window_s) samples_.pop_front();
+  }
+  last_ack_ = std::max(last_ack_, t);
+  outstanding_.erase(it);
+}
+
+void BandwidthMonitor::onWindowDelivered(bool fully_in_time) { probing_ = fully_in_time; }
+
+std::size_t BandwidthMonitor::outstandingBytes() const {
+  std::size_t n = 0;
+  for (const auto& [id, o] : outstanding_) n += o.bytes;
+  return n;
+}
+
+bool BandwidthMonitor::outage(double t) const {
+  if (outstanding_.empty()) return false;
+  double oldest = 1e300;
+  for (const auto& [id, o] : outstanding_) oldest = std::min(oldest, o.sent);
+  const double since = std::max(oldest, last_ack_);
+  const double rate = std::max(last_sample_bps_, p_.initial_bps * 0.01);
+  const double expected = static_cast<double>(outstandingBytes()) / rate;
+  return t - since > p_.outage_timeout_s + expected;
+}
+
+double BandwidthMonitor::estimate(double t) const {
+  if (outage(t)) return 0.0;
+  if (sample_count_ == 0) return p_.initial_bps;
+  double best = 0;
+  for (const auto& s : samples_)
+    if (s.t > t - p_.window_s && s.t <= t) best = std::max(best, s.bps);
+  if (best > 0) return best;
+  // No sample in the window: decay the last known rate.
+  const double silent = t - last_sample_t_ - p_.window_s;
+  return last_sample_bps_ * std::exp(-std::max(0.0, silent) / p_.decay_tau_s);
+}
+
+double BandwidthMonitor::planningRate(double t) const {
+  return estimate(t) * (probing_ ? p_.probe_factor : 1.0);
+}
+
+}  // namespace hermes::agent
