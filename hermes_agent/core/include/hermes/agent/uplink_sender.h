@@ -1,0 +1,68 @@
+// Agent side of exactly-once submap delivery: the map buffer (durable spool)
+// plus the bandwidth monitor. Submaps are sent in (session, seq) order, at most
+// `max_in_flight_bytes` unacknowledged on the wire at a time, resent after a
+// timeout or a reconnect until acknowledged; acks free the buffer. The transport
+// is a callback, so the same class drives the emulated link and ROS topics.
+#pragma once
+
+#include <functional>
+#include <map>
+
+#include "hermes/agent/bandwidth_monitor.h"
+#include "hermes/agent/map_buffer.h"
+
+namespace hermes::agent {
+
+struct UplinkParams {
+  MapBufferParams buffer;
+  BandwidthMonitorParams monitor;
+  double max_in_flight_mbytes = 4.0;  ///< [MB] unacked bytes allowed on the wire
+
+  Status read(const Config& c);
+  Status validate() const;
+  void write(ConfigWriter& w) const;
+};
+
+struct UplinkStats {
+  std::size_t submitted = 0, sends = 0, resends = 0, acked = 0, refused = 0;
+  std::size_t bytes_sent = 0;  ///< every byte handed to the transport, resends included
+};
+
+class UplinkSender {
+ public:
+  using Transport = std::function<void(std::uint32_t session, std::uint64_t seq,
+                                       const std::vector<std::uint8_t>& frame)>;
+
+  static Expected<UplinkSender> create(const UplinkParams& p, Transport transport);
+
+  /// Hands a new encoded submap over; error if the buffer refuses it (full).
+  Status submit(std::uint32_t session, std::uint64_t seq, std::vector<std::uint8_t> frame,
+                double now);
+  /// Sends what may be sent at time `now` (call regularly).
+  void poll(double now);
+  /// Acknowledgement from the server (duplicates and unknown keys are fine).
+  Status onAck(std::uint32_t session, std::uint64_t seq, double now);
+  /// The link came back / the server restarted: resend everything unacked.
+  void onReconnect();
+
+  BandwidthMonitor& monitor() { return monitor_; }
+  const MapBuffer& buffer() const { return buffer_; }
+  MapBuffer& buffer() { return buffer_; }
+  const UplinkStats& stats() const { return stats_; }
+  /// Unacknowledged bytes (buffered, sent or not): the coordinator's backlog.
+  std::size_t backlogBytes() const { return buffer_.pendingBytes(); }
+
+ private:
+  UplinkSender(UplinkParams p, MapBuffer buffer, Transport transport);
+
+  UplinkParams p_;
+  MapBuffer buffer_;
+  BandwidthMonitor monitor_;
+  Transport transport_;
+  std::map<std::pair<std::uint32_t, std::uint64_t>, std::uint64_t> send_ids_;
+  std::map<std::pair<std::uint32_t, std::uint64_t>, std::size_t> in_flight_;
+  std::uint64_t next_send_id_ = 0;
+  UplinkStats stats_;
+};
+
+}  // namespace hermes::agent
