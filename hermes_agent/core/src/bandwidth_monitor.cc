@@ -72,11 +72,14 @@ std::size_t BandwidthMonitor::outstandingBytes() const {
 
 bool BandwidthMonitor::outage(double t) const {
   if (outstanding_.empty()) return false;
-  double oldest = 1e300;
-  for (const auto& [id, o] : outstanding_) oldest = std::min(oldest, o.sent);
-  const double since = std::max(oldest, last_ack_);
+  // The next ack is due one transfer time of the oldest outstanding message
+  // after the link last made progress; silence beyond that + T_out is an outage.
+  const Outstanding* oldest = nullptr;
+  for (const auto& [id, o] : outstanding_)
+    if (!oldest || o.sent < oldest->sent) oldest = &o;
+  const double since = std::max(oldest->sent, last_ack_);
   const double rate = std::max(last_sample_bps_, p_.initial_bps * 0.01);
-  const double expected = static_cast<double>(outstandingBytes()) / rate;
+  const double expected = static_cast<double>(oldest->bytes) / rate;
   return t - since > p_.outage_timeout_s + expected;
 }
 

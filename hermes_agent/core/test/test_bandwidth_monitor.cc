@@ -77,3 +77,30 @@ TEST(BandwidthMonitor, ParamsValidate) {
   BandwidthMonitorParams q;
   EXPECT_FALSE(q.read(*c).ok());
 }
+
+// Issue trace: 30 -> 10 -> 2 -> 0 (30 s outage) -> 20 Mbit/s. The estimate must be
+// within 20 % of the true rate within two 5-s windows after each change, and the
+// outage detected within the timeout.
+TEST(BandwidthMonitor, FollowsStepTrace) {
+  auto trace = LinkTrace::fromString(
+      "time_s,rate_mbitps,latency_ms,loss\n0,30,5,0\n60,10,5,0\n120,2,5,0\n180,0,5,0\n"
+      "210,20,5,0\n",
+      "steps");
+  ASSERT_TRUE(trace.ok());
+  Sim sim(*trace);
+  sim.run(270.0);
+  const std::string csv = ::testing::TempDir() + "/monitor_steps.csv";
+  if (std::FILE* f = std::fopen(csv.c_str(), "w")) {
+    std::fprintf(f, "time_s,true_mbitps,estimate_mbitps\n");
+    for (const auto& [t, e] : sim.curve)
+      std::fprintf(f, "%.2f,%.3f,%.3f\n", t, trace->at(t).rate_mbitps, e * 8e-6);
+    std::fclose(f);
+  }
+  struct Check { double t_change, rate; };
+  for (const Check c : {Check{0, 30}, Check{60, 10}, Check{120, 2}, Check{210, 20}}) {
+    const double t = c.t_change + 10.0 + 0.5;  // two windows later
+    const double est = sim.estimateAt(t) * 8e-6;
+    EXPECT_NEAR(est, c.rate, 0.2 * c.rate) << "at t=" << t << " (change at " << c.t_change << ")";
+  }
+  EXPECT_EQ(sim.estimateAt(180.0 + 3.0 + 5.0), 0.0);  // outage seen within T_out + one window
+}
