@@ -156,9 +156,18 @@ TEST(StereoRig, RectifiesRealImages) {
   for (const auto& x : m0)
     if (x.distance < 40) dy0.push_back(std::abs(kl0[x.queryIdx].pt.y - kr0[x.trainIdx].pt.y));
   ASSERT_GT(dy0.size(), 100u);
+  auto within1 = [](const std::vector<double>& v) {
+    return static_cast<double>(std::count_if(v.begin(), v.end(), [](double x) { return x <= 1.0; })) /
+           v.size();
+  };
+  // Cross-checked ORB matches still hold some outliers, and keypoints of coarse
+  // octaves are quantised, so count the share of matches within one row.
+  EXPECT_GT(within1(dy), 0.5);
+  EXPECT_LT(within1(dy0), 0.2);  // raw images: rows differ by ~7-14 px
   EXPECT_LT(med_rect, 0.6);
-  std::printf("[ rectify ] remap %.2f ms; ORB |dy| median %.3f px rectified (%zu matches) vs %.3f "
-              "px raw\n", ms, med_rect, dy.size(), median(dy0));
+  std::printf("[ rectify ] remap %.2f ms; ORB matches within 1 row: %.0f%% rectified (%zu), "
+              "%.0f%% raw (median |dy| %.1f px)\n", ms, 100 * within1(dy), dy.size(),
+              100 * within1(dy0), median(dy0));
 }
 
 TEST(StereoRig, DegenerateRigsAreErrors) {
