@@ -52,6 +52,7 @@ RgbdCamera iclNuimDefaultCamera() {
 Expected<RgbdCamera> readTumCameraYaml(const std::string& path) {
   auto text = readTextFile(path);
   if (!text) return Error{text.error()};
+  if (text->rfind("%YAML", 0) == 0) (*text)[0] = '#';  // tolerate OpenCV's "%YAML:1.0"
   YAML::Node root;
   try {
     root = YAML::Load(*text);

@@ -175,7 +175,7 @@ TEST(TumDataset, ErrorsNameFilesAndLines) {
   r = TumDataset::open(dir);
   ASSERT_FALSE(r.ok());
   EXPECT_TRUE(contains(r.error(), dir + "/camera.yaml:2")) << r.error();
-  std::ofstream(fs::path(dir) / "camera.yaml") << "fx: 500\nfy: 500\ncx: 1\ncy: 1\nwidth: 64\n";
+  std::ofstream(fs::path(dir) / "camera.yaml") << "%YAML:1.0\nfx: 500\nfy: 500\ncx: 1\ncy: 1\nwidth: 64\n";
   r = TumDataset::open(dir);
   ASSERT_FALSE(r.ok());
   EXPECT_TRUE(contains(r.error(), "height")) << r.error();
