@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 
 #include "hermes/core/euroc_dataset.h"
@@ -231,4 +232,36 @@ TEST(EurocDataset, MissingImageIsSkippedAndUnreadableImageNamed) {
   ASSERT_FALSE(f.ok());
   EXPECT_TRUE(contains(f.error(), (data / files[0].filename()).string())) << f.error();
   EXPECT_TRUE(r->load(1).ok());
+}
+
+TEST(EurocCameraYaml, MutatedFilesNeverCrash) {
+  std::ifstream in(kMicro + "/mav0/cam0/sensor.yaml");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string original = ss.str();
+  const std::string path = ::testing::TempDir() + "/mutated_sensor.yaml";
+  std::mt19937 rng(3);
+  int errors = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    std::string text = original;
+    const int flips = 1 + trial % 4;
+    for (int k = 0; k < flips; ++k) {
+      const std::size_t pos = rng() % text.size();
+      const char pool[] = "[]{}:,-#. \n0123456789eaz\"'";
+      text[pos] = pool[rng() % (sizeof(pool) - 1)];
+    }
+    if (trial % 7 == 0) text.resize(rng() % text.size());  // truncated file
+    std::ofstream(path, std::ios::trunc) << text;
+    auto c = readEurocCameraYaml(path);
+    if (!c.ok()) {
+      ++errors;
+      EXPECT_TRUE(contains(c.error(), path)) << c.error();
+      continue;
+    }
+    // Whatever parses must still be a usable camera.
+    EXPECT_GT(c->K.fx, 0);
+    EXPECT_GT(c->K.width, 0);
+    EXPECT_TRUE(c->T_B_C.matrix().allFinite());
+  }
+  EXPECT_GT(errors, 20);
 }
