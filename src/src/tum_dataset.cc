@@ -1,0 +1,252 @@
+#include "hermes/core/tum_dataset.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <tuple>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "dataset_text.h"
+
+namespace fs = std::filesystem;
+using namespace hermes::dataset_text;  // NOLINT: private helpers
+
+namespace hermes {
+namespace {
+
+Status requireDouble(const YAML::Node& root, const std::string& key, const std::string& path,
+                     double* out, bool required = true) {
+  const YAML::Node n = root[key];
+  if (!n) return required ? Status(Error{path + ": missing key '" + key + "'"}) : Status::Ok();
+  try {
+    *out = n.as<double>();
+  } catch (const YAML::Exception&) {
+    return Error{path + ":" + std::to_string(n.Mark().line + 1) + ": '" + key +
+                 "' must be a number"};
+  }
+  if (!std::isfinite(*out)) return Error{path + ": '" + key + "' is not finite"};
+  return Status::Ok();
+}
+
+}  // namespace
+
+RgbdCamera iclNuimDefaultCamera() {
+  RgbdCamera c;
+  c.K.fx = 481.20;
+  c.K.fy = 480.00;
+  c.K.cx = 319.5;
+  c.K.cy = 239.5;
+  c.K.width = 640;
+  c.K.height = 480;
+  c.depth_scale = 5000.0;
+  c.rate_hz = 30.0;
+  return c;
+}
+
+Expected<RgbdCamera> readTumCameraYaml(const std::string& path) {
+  auto text = readTextFile(path);
+  if (!text) return Error{text.error()};
+  if (text->rfind("%YAML", 0) == 0) (*text)[0] = '#';  // tolerate OpenCV's "%YAML:1.0"
+  YAML::Node root;
+  try {
+    root = YAML::Load(*text);
+  } catch (const YAML::Exception& e) {
+    return Error{path + ":" + std::to_string(e.mark.line + 1) + ": YAML error: " + e.msg};
+  }
+  if (!root.IsMap()) return Error{path + ": not a YAML map"};
+  RgbdCamera cam;
+  if (root["camera_model"]) {
+    const std::string model = root["camera_model"].Scalar();
+    if (model != "pinhole")
+      return Error{path + ": unsupported camera_model '" + model + "' (supported: pinhole)"};
+  }
+  double w = 0, h = 0;
+  for (auto [key, out] : {std::pair<const char*, double*>{"fx", &cam.K.fx}, {"fy", &cam.K.fy},
+                          {"cx", &cam.K.cx}, {"cy", &cam.K.cy}, {"width", &w}, {"height", &h}}) {
+    Status s = requireDouble(root, key, path, out);
+    if (!s) return Error{s.error()};
+  }
+  if (!(cam.K.fx > 0 && cam.K.fy > 0)) return Error{path + ": fx and fy must be positive"};
+  if (!(w >= 1 && h >= 1 && w == std::floor(w) && h == std::floor(h) && w < 1e5 && h < 1e5))
+    return Error{path + ": width and height must be positive integers"};
+  cam.K.width = static_cast<int>(w);
+  cam.K.height = static_cast<int>(h);
+  Status s = requireDouble(root, "depth_scale", path, &cam.depth_scale, false);
+  if (!s) return Error{s.error()};
+  if (!(cam.depth_scale > 0)) return Error{path + ": depth_scale must be positive"};
+  s = requireDouble(root, "rate_hz", path, &cam.rate_hz, false);
+  if (!s) return Error{s.error()};
+  if (!(cam.rate_hz > 0)) return Error{path + ": rate_hz must be positive"};
+  if (const YAML::Node t = root["T_B_C"]) {
+    if (!t.IsSequence() || t.size() != 16)
+      return Error{path + ": 'T_B_C' must be a list of 16 numbers (row-major 4x4)"};
+    Mat4 T;
+    try {
+      for (int i = 0; i < 16; ++i) T(i / 4, i % 4) = t[i].as<double>();
+    } catch (const YAML::Exception& e) {
+      return Error{path + ":" + std::to_string(e.mark.line + 1) + ": 'T_B_C' holds a non-number"};
+    }
+    const Mat3 R = T.topLeftCorner<3, 3>();
+    if (!T.allFinite() || (R.transpose() * R - Mat3::Identity()).norm() > 1e-4 ||
+        R.determinant() < 0 || (T.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).norm() > 1e-9)
+      return Error{path + ": 'T_B_C' is not a rigid transform"};
+    cam.T_B_C = SE3(T);
+  }
+  return cam;
+}
+
+Status writeTumCameraYaml(const std::string& path, const RgbdCamera& cam) {
+  std::ostringstream o;
+  o.precision(17);
+  o << "# Hermes RGB-D camera (pinhole, no distortion)\ncamera_model: pinhole\n"
+    << "fx: " << cam.K.fx << "  # [px]\nfy: " << cam.K.fy << "\ncx: " << cam.K.cx
+    << "\ncy: " << cam.K.cy << "\nwidth: " << cam.K.width << "  # [px]\nheight: "
+    << cam.K.height << "\ndepth_scale: " << cam.depth_scale
+    << "  # depth PNG value per metre\nrate_hz: " << cam.rate_hz
+    << "  # [Hz]\nT_B_C: [";  // body <- camera, row-major
+  const Mat4 T = cam.T_B_C.matrix();
+  for (int i = 0; i < 16; ++i) o << T(i / 4, i % 4) << (i < 15 ? ", " : "");
+  o << "]  # body <- camera, row-major 4x4\n";
+  return writeTextFile(path, o.str());
+}
+
+Expected<std::vector<TumImageRow>> readTumImageList(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return Error{"image list '" + path + "' cannot be opened"};
+  std::vector<TumImageRow> rows;
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const std::string t = trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    std::istringstream ss(t);
+    std::string stamp, file, extra;
+    ss >> stamp >> file;
+    const std::string where = path + ":" + std::to_string(lineno);
+    TumImageRow row;
+    if (!parseDouble(stamp, &row.t) || row.t < 0)
+      return Error{where + ": bad timestamp '" + stamp + "'"};
+    if (file.empty() || (ss >> extra)) return Error{where + ": expected 'timestamp filename'"};
+    row.filename = file;
+    if (!rows.empty() && row.t <= rows.back().t) return Error{where + ": timestamps must increase"};
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+std::vector<std::pair<std::size_t, std::size_t>> associateStamps(const std::vector<double>& a,
+                                                                 const std::vector<double>& b,
+                                                                 double max_dt) {
+  std::vector<std::tuple<double, std::size_t, std::size_t>> cand;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    auto it = std::lower_bound(b.begin(), b.end(), a[i] - max_dt);
+    for (; it != b.end() && *it <= a[i] + max_dt; ++it)
+      cand.emplace_back(std::abs(*it - a[i]), i, static_cast<std::size_t>(it - b.begin()));
+  }
+  std::sort(cand.begin(), cand.end());
+  std::vector<char> used_a(a.size(), 0), used_b(b.size(), 0);
+  std::vector<std::pair<std::size_t, std::size_t>> out;
+  for (const auto& [dt, i, j] : cand) {
+    if (used_a[i] || used_b[j]) continue;
+    used_a[i] = used_b[j] = 1;
+    out.emplace_back(i, j);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+Expected<TumDataset> TumDataset::open(const std::string& dir, const TumOptions& opt) {
+  if (!(opt.max_dt > 0)) return Error{"TUM reader: association tolerance must be positive"};
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return Error{"TUM dataset folder '" + dir + "' does not exist"};
+  TumDataset ds;
+  ds.root_ = dir;
+  const fs::path root(dir);
+
+  const fs::path yaml = root / "camera.yaml";
+  if (fs::exists(yaml, ec)) {
+    auto cam = readTumCameraYaml(yaml.string());
+    if (!cam) return Error{cam.error()};
+    ds.camera_ = *cam;
+  } else {
+    ds.camera_ = iclNuimDefaultCamera();
+    ds.default_camera_ = true;
+    ds.warnings_.push_back("no camera.yaml in '" + dir +
+                           "': using ICL-NUIM default intrinsics (fx 481.20, fy 480.00, "
+                           "cx 319.5, cy 239.5, 640x480, depth scale 5000)");
+  }
+  if (opt.depth_scale > 0) ds.camera_.depth_scale = opt.depth_scale;
+
+  auto rgb = readTumImageList((root / "rgb.txt").string());
+  if (!rgb) return Error{rgb.error()};
+  auto depth = readTumImageList((root / "depth.txt").string());
+  if (!depth) return Error{depth.error()};
+
+  auto existing = [&](const std::vector<TumImageRow>& rows, int* missing) {
+    std::vector<TumImageRow> keep;
+    for (const auto& r : rows) {
+      if (fs::is_regular_file(root / r.filename, ec))
+        keep.push_back(r);
+      else
+        ++*missing;
+    }
+    return keep;
+  };
+  const auto rgb_ok = existing(*rgb, &ds.skipped_.rgb_missing_image);
+  const auto depth_ok = existing(*depth, &ds.skipped_.depth_missing_image);
+  std::vector<double> ta, tb;
+  for (const auto& r : rgb_ok) ta.push_back(r.t);
+  for (const auto& r : depth_ok) tb.push_back(r.t);
+  const auto assoc = associateStamps(ta, tb, opt.max_dt);
+  for (const auto& [i, j] : assoc)
+    ds.pairs_.push_back({ta[i], tb[j], (root / rgb_ok[i].filename).string(),
+                         (root / depth_ok[j].filename).string()});
+  ds.skipped_.rgb_unmatched = static_cast<int>(ta.size() - assoc.size());
+  ds.skipped_.depth_unmatched = static_cast<int>(tb.size() - assoc.size());
+  if (ds.pairs_.empty())
+    return Error{"TUM folder '" + dir + "': no rgb/depth pair within " +
+                 std::to_string(opt.max_dt) + " s"};
+
+  const fs::path gt = root / "groundtruth.txt";
+  if (fs::exists(gt, ec)) {
+    auto traj = readTumTrajectory(gt.string());
+    if (!traj) return Error{traj.error()};
+    ds.groundtruth_ = std::move(*traj);
+  }
+  return ds;
+}
+
+Expected<RgbdFrame> TumDataset::load(std::size_t i) const {
+  if (i >= pairs_.size())
+    return Error{"frame " + std::to_string(i) + " out of range (" + std::to_string(size()) +
+                 " pairs in '" + root_ + "')"};
+  const Pair& p = pairs_[i];
+  RgbdFrame f;
+  f.t = p.t_rgb;
+  f.depth_t = p.t_depth;
+  f.stamp_ns = std::llround(p.t_rgb * 1e9);
+  f.rgb = cv::imread(p.rgb_path, cv::IMREAD_COLOR);
+  if (f.rgb.empty()) return Error{"image '" + p.rgb_path + "' cannot be read"};
+  if (f.rgb.cols != camera_.K.width || f.rgb.rows != camera_.K.height)
+    return Error{"image '" + p.rgb_path + "' is " + std::to_string(f.rgb.cols) + "x" +
+                 std::to_string(f.rgb.rows) + ", camera says " + std::to_string(camera_.K.width) +
+                 "x" + std::to_string(camera_.K.height)};
+  cv::cvtColor(f.rgb, f.gray, cv::COLOR_BGR2GRAY);
+  const cv::Mat raw = cv::imread(p.depth_path, cv::IMREAD_ANYDEPTH);
+  if (raw.empty()) return Error{"depth image '" + p.depth_path + "' cannot be read"};
+  if (raw.type() != CV_16UC1)
+    return Error{"depth image '" + p.depth_path + "' is not a 16-bit single-channel PNG"};
+  if (raw.size() != f.rgb.size())
+    return Error{"depth image '" + p.depth_path + "' size differs from its rgb image"};
+  raw.convertTo(f.depth_m, CV_32F, 1.0 / camera_.depth_scale);
+  return f;
+}
+
+}  // namespace hermes
