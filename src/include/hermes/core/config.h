@@ -1,5 +1,5 @@
 // Layered YAML configuration. Each module owns one Params struct with
-//   Status read(const ConfigSection&), void write(ConfigWriter&), Status validate().
+//   Status read(const Config&), void write(ConfigWriter&), Status validate().
 // A Config is built from a YAML file plus `--set key=value` overrides; reading
 // marks keys as used so that unknown keys (typos) can be reported by name.
 #pragma once
