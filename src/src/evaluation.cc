@@ -31,8 +31,8 @@ Status EvalParams::validate() const {
     return Error{"eval.rpe_delta_s must be > 0, got " + std::to_string(rpe_delta_s)};
   if (rpe_delta_frames < 0)
     return Error{"eval.rpe_delta_frames must be >= 0, got " + std::to_string(rpe_delta_frames)};
-  if (!(rpe_tolerance >= 0 && rpe_tolerance < 1))
-    return Error{"eval.rpe_tolerance must be in [0, 1), got " + std::to_string(rpe_tolerance)};
+  if (!(rpe_tolerance >= 0) || !std::isfinite(rpe_tolerance))
+    return Error{"eval.rpe_tolerance must be a finite value >= 0, got " + std::to_string(rpe_tolerance)};
   return Status::Ok();
 }
 
@@ -76,6 +76,11 @@ Expected<Association> associate(const Trajectory& gt, const Trajectory& est, dou
   return a;
 }
 
+double relativeAngle(const Quat& a, const Quat& b) {
+  const Quat q = a.conjugate() * b;
+  return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w()));
+}
+
 ErrorStats computeStats(std::vector<double> v) {
   ErrorStats s;
   s.count = v.size();
@@ -108,8 +113,7 @@ AteResult ateWithAlignment(const Association& assoc, const Alignment& alignment)
   for (size_t i = 0; i < assoc.matched(); ++i) {
     const SE3 aligned = alignment.applyToPose(assoc.est[i]);
     r.trans_errors_m.push_back((assoc.gt[i].translation() - aligned.translation()).norm());
-    rot.push_back(kRadToDeg * rotationAngle(assoc.gt[i].rotation().transpose() *
-                                            aligned.rotation()));
+    rot.push_back(kRadToDeg * relativeAngle(assoc.gt[i].quat(), aligned.quat()));
   }
   r.trans_m = computeStats(r.trans_errors_m);
   r.rot_deg = computeStats(std::move(rot));
@@ -138,24 +142,21 @@ RpeResult computeRpe(const Association& assoc, const Alignment& alignment,
       j = i + size_t(params.rpe_delta_frames);
       if (j >= n) break;
     } else {
-      const double target = assoc.t[i] + params.rpe_delta_s;
-      auto it = std::lower_bound(assoc.t.begin() + i + 1, assoc.t.end(), target);
-      // Closest of the two stamps around the target.
-      size_t best = n;
-      if (it != assoc.t.end()) best = size_t(it - assoc.t.begin());
-      if (it - assoc.t.begin() > long(i + 1) &&
-          (best == n || target - *(it - 1) < assoc.t[best] - target))
-        best = size_t(it - 1 - assoc.t.begin());
-      if (best == n) break;
+      // Partner: the first matched pose at least delta later (1 ns slack for rounding),
+      // dropped when it comes more than rpe_tolerance * delta late (a gap).
+      const double target = assoc.t[i] + params.rpe_delta_s - 1e-9;
+      const auto it = std::lower_bound(assoc.t.begin() + long(i) + 1, assoc.t.end(), target);
+      if (it == assoc.t.end()) break;
+      const size_t best = size_t(it - assoc.t.begin());
       const double dt = assoc.t[best] - assoc.t[i];
-      if (std::abs(dt - params.rpe_delta_s) > params.rpe_tolerance * params.rpe_delta_s) continue;
+      if (dt - params.rpe_delta_s > params.rpe_tolerance * params.rpe_delta_s) continue;
       j = best;
     }
     const SE3 rel_gt = assoc.gt[i].inverse() * assoc.gt[j];
     const SE3 rel_est = est[i].inverse() * est[j];
     const SE3 err = rel_gt.inverse() * rel_est;
     trans.push_back(err.translation().norm());
-    rot.push_back(kRadToDeg * rotationAngle(err.rotation()));
+    rot.push_back(kRadToDeg * relativeAngle(Quat::Identity(), err.quat()));
   }
   r.pairs = trans.size();
   r.trans_m = computeStats(std::move(trans));

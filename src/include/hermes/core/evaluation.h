@@ -19,7 +19,9 @@ struct EvalParams {
   double max_dt = 0.02;         ///< [s] max distance to the nearest gt sample
   double rpe_delta_s = 1.0;     ///< [s] RPE pair spacing (used if rpe_delta_frames == 0)
   int rpe_delta_frames = 0;     ///< RPE pair spacing in matched poses (> 0 overrides seconds)
-  double rpe_tolerance = 0.2;   ///< accepted |dt - delta| / delta for a time-based RPE pair
+  /// Time-based RPE pairs (i, j): j is the first matched pose with t_j >= t_i + delta;
+  /// the pair is dropped when t_j - t_i > (1 + rpe_tolerance) * delta.
+  double rpe_tolerance = 0.1;
 
   Status read(const Config& config, const std::string& section = "eval");
   Status validate() const;
@@ -39,6 +41,10 @@ struct Association {
 /// samples, or taken from the end sample when t lies just outside the gt span.
 /// Errors: gt empty or not strictly increasing in time.
 Expected<Association> associate(const Trajectory& gt, const Trajectory& est, double max_dt);
+
+/// Angle [rad] of a^-1 * b, accurate also near 0 (atan2 form; acos of the trace
+/// loses ~1e-8 rad there).
+double relativeAngle(const Quat& a, const Quat& b);
 
 /// Summary of a list of non-negative errors.
 struct ErrorStats {
