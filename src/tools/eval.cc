@@ -117,7 +117,6 @@ int main(int argc, char** argv) {
   if (Status s = params.validate(); !s) fail(s.error());
 
   std::vector<eval::AgentTrajectories> agents;
-  size_t total_poses = 0;
   for (size_t k = 0; k < gts.size(); ++k) {
     eval::AgentTrajectories at;
     at.name = names[k].empty() ? stem(ests[k]) : names[k];
@@ -127,8 +126,7 @@ int main(int argc, char** argv) {
     if (!gt) fail(gt.error());
     auto est = eval::readTrajectoryForEval(ests[k]);
     if (!est) fail(est.error());
-    total_poses += gt->size() + est->size();
-    if (total_poses > 50000)
+    if (gt->size() + est->size() > 20000)
       std::fprintf(stderr, "[hermes_eval] read %s: %zu gt poses, %zu estimate poses\n",
                    at.name.c_str(), gt->size(), est->size());
     at.gt = std::move(*gt);
