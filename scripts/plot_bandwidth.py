@@ -80,6 +80,15 @@ def read_csv(path):
     return data
 
 
+def extend(t, y):
+    """Step series that also show the last interval (as long as the one before)."""
+    t, y = list(t), list(y)
+    if len(t) >= 2:
+        t.append(t[-1] + (t[-1] - t[-2]))
+        y.append(y[-1])
+    return t, y
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -103,19 +112,20 @@ def main():
         t = [s[0] for s in samples]
         r = [s[1] for s in samples]
         mean = sum(r) / len(r)
-        ax.step(t, r, where="post", color=c, lw=1.5,
+        ax.step(*extend(t, r), where="post", color=c, lw=1.5,
                 label="%s (mean %.1f, peak %.1f kB/s)" % (agent, mean, max(r)))
         if not shared and caps[agent]:
-            ax.step([x for x, _ in caps[agent]], [y for _, y in caps[agent]], where="post",
+            ax.step(*extend([x for x, _ in caps[agent]], [y for _, y in caps[agent]]), where="post",
                     color=c, ls="--", lw=1, label="%s link capacity" % agent)
     if shared and caps and next(iter(caps.values())):
         cap = next(iter(caps.values()))
-        ax.step([x for x, _ in cap], [y for _, y in cap], where="post", color="k", ls="--",
+        ax.step(*extend([x for x, _ in cap], [y for _, y in cap]), where="post", color="k", ls="--",
                 lw=1.2, label="link capacity (shared)")
         # Shade outages.
+        cap_t = extend([x for x, _ in cap], [0] * len(cap))[0]
         for i, (t0, y) in enumerate(cap):
             if y == 0:
-                t1 = cap[i + 1][0] if i + 1 < len(cap) else t0
+                t1 = cap_t[i + 1] if i + 1 < len(cap_t) else t0
                 ax.axvspan(t0, t1, color="red", alpha=0.1, lw=0)
         if len(data) > 1 and not args.no_total:
             totals = OrderedDict()
@@ -123,8 +133,8 @@ def main():
                 for t, r, _ in samples:
                     totals[t] = totals.get(t, 0.0) + r
             ts = sorted(totals)
-            ax.step(ts, [totals[t] for t in ts], where="post", color="gray", lw=1, alpha=0.8,
-                    label="total")
+            ax.step(*extend(ts, [totals[t] for t in ts]), where="post", color="gray", lw=1,
+                    alpha=0.8, label="total")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("kB/s")
     ax.set_ylim(bottom=0)

@@ -135,7 +135,8 @@ def main():
     ap.add_argument("--title", default=None)
     args = ap.parse_args()
     if not args.gt or len(args.gt) != len(args.est):
-        die("needs matching --gt/--est pairs (got %d --gt, %d --est)" % (len(args.gt), len(args.est)))
+        die("needs matching --gt/--est pairs (got %d --gt, %d --est)"
+            % (len(args.gt), len(args.est)))
     if args.name and len(args.name) != len(args.est):
         die("give one --name per --est or none")
 
