@@ -4,6 +4,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "hermes/core/bandwidth_log.h"
 #include "hermes/core/config.h"
 #include "hermes/core/metrics.h"
 
@@ -198,4 +199,33 @@ TEST(EvalParams, ReadsAndValidatesConfig) {
   const Status s = eval::EvalParams{}.read(*neg);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().find("rpe_delta_s"), std::string::npos) << s.error();
+}
+
+TEST(BandwidthCsv, RoundTripSummaryAndErrors) {
+  std::vector<BandwidthSample> s = {
+      {0.0, "agent_0", 10.0, 100.0}, {0.0, "agent_1", 30.0, 100.0},
+      {0.5, "agent_0", 50.0, 100.0}, {0.5, "agent_1", 20.0, 100.0},
+      {1.0, "agent_0", 0.0, 0.0},    {1.0, "agent_1", 0.0, std::nullopt}};
+  const std::string path = ::testing::TempDir() + "/bw.csv";
+  ASSERT_TRUE(writeBandwidthCsv(path, s));
+  auto r = readBandwidthCsv(path);
+  ASSERT_TRUE(r.ok()) << r.error();
+  ASSERT_EQ(r->size(), 6u);
+  EXPECT_EQ((*r)[3].agent, "agent_1");
+  EXPECT_DOUBLE_EQ((*r)[2].kBps, 50.0);
+  EXPECT_FALSE((*r)[5].link_capacity_kBps.has_value());
+  EXPECT_DOUBLE_EQ(*(*r)[4].link_capacity_kBps, 0.0);
+  const BandwidthSummary sum = summarizeBandwidth(*r);
+  EXPECT_EQ(sum.intervals, 3u);
+  EXPECT_DOUBLE_EQ(sum.kBps_peak, 70.0);
+  EXPECT_DOUBLE_EQ(sum.kBps_mean, 110.0 / 3.0);
+
+  const std::string bad = writeText("bw_bad.csv", "time_s,agent,kBps,link_capacity_kBps\n"
+                                                  "0,a,1,2\n0.5,a,fast,2\n");
+  auto b = readBandwidthCsv(bad);
+  ASSERT_FALSE(b.ok());
+  EXPECT_NE(b.error().find(bad + ":3"), std::string::npos) << b.error();
+  EXPECT_NE(b.error().find("kBps"), std::string::npos) << b.error();
+  EXPECT_FALSE(readBandwidthCsv(writeText("bw_hdr.csv", "t,agent,kBps\n")).ok());
+  EXPECT_FALSE(writeBandwidthCsv(path + ".bad", {{0.0, "a,b", 1.0, std::nullopt}}).ok());
 }
