@@ -31,6 +31,8 @@ const char* kUsage =
     "  --max-dt S          max distance to the nearest gt sample [s] (default 0.02)\n"
     "  --rpe-delta S       RPE pair spacing [s] (default 1.0)\n"
     "  --rpe-frames N      RPE pair spacing in matched poses (overrides --rpe-delta)\n"
+    "  --rpe-tolerance F   drop a time-based RPE pair when its partner comes more than\n"
+    "                      F * delta late (default 0.1; raise it for sparse keyframes)\n"
     "  --name NAME         agent name for the next --est (default: file stem)\n"
     "  --json OUT          write the metrics JSON to OUT ('-' = stdout; the table then\n"
     "                      goes to stderr)\n"
@@ -103,6 +105,8 @@ int main(int argc, char** argv) {
       const double f = parseNumber(a, value());
       if (f != int(f)) fail("--rpe-frames expects an integer");
       params.rpe_delta_frames = int(f);
+    } else if (a == "--rpe-tolerance") {
+      params.rpe_tolerance = parseNumber(a, value());
     } else if (a == "--json") {
       json_out = value();
     } else {
