@@ -185,14 +185,18 @@ Expected<TrajectoryEval> evaluateTrajectory(const Trajectory& gt, const Trajecto
 }
 
 Expected<MultiAgentEval> evaluateAgents(const std::vector<AgentTrajectories>& agents,
-                                        const EvalParams& params) {
+                                        const EvalParams& params, bool allow_partial) {
   if (agents.empty()) return Error{"no agents to evaluate"};
   MultiAgentEval m;
   Association pooled;
   std::vector<size_t> offsets;
   for (const AgentTrajectories& a : agents) {
     Expected<TrajectoryEval> ev = evaluateTrajectory(a.gt, a.est, params, a.name);
-    if (!ev) return Error{ev.error()};
+    if (!ev) {
+      if (!allow_partial) return Error{ev.error()};
+      m.failed.push_back({a.name, ev.error()});
+      continue;
+    }
     offsets.push_back(pooled.matched());
     const Association& as = ev->assoc;
     pooled.t.insert(pooled.t.end(), as.t.begin(), as.t.end());
@@ -201,6 +205,7 @@ Expected<MultiAgentEval> evaluateAgents(const std::vector<AgentTrajectories>& ag
     pooled.unmatched += as.unmatched;
     m.agents.push_back(std::move(*ev));
   }
+  if (m.agents.empty()) return Error{"no agent could be evaluated: " + m.failed.front().error};
   offsets.push_back(pooled.matched());
   m.matched = pooled.matched();
   m.unmatched = pooled.unmatched;

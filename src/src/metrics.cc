@@ -27,7 +27,7 @@ size_t TimingStats::count(const std::string& stage) const {
   return it == samples_.end() ? 0 : it->second.size();
 }
 
-double percentile(std::vector<double> v, double q) {
+double timing::percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
   const double pos = std::clamp(q, 0.0, 100.0) / 100.0 * double(v.size() - 1);
@@ -40,7 +40,7 @@ std::map<std::string, StageTiming> TimingStats::summary() const {
   std::map<std::string, StageTiming> out;
   for (const auto& [stage, v] : samples_) {
     if (v.empty()) continue;
-    out[stage] = {percentile(v, 50), percentile(v, 95), int64_t(v.size())};
+    out[stage] = {timing::percentile(v, 50), timing::percentile(v, 95), int64_t(v.size())};
   }
   return out;
 }
@@ -322,6 +322,17 @@ Expected<RunMetrics> readMetricsJson(const std::string& path) {
   return metricsFromJson(j, path);
 }
 
+namespace {
+AgentMetrics& agentEntry(RunMetrics* m, const std::string& name) {
+  auto it = std::find_if(m->per_agent.begin(), m->per_agent.end(),
+                         [&](const AgentMetrics& x) { return x.agent == name; });
+  if (it != m->per_agent.end()) return *it;
+  m->per_agent.push_back(AgentMetrics{});
+  m->per_agent.back().agent = name;
+  return m->per_agent.back();
+}
+}  // namespace
+
 void fillAccuracy(const eval::MultiAgentEval& ev, const eval::EvalParams& params,
                   RunMetrics* m) {
   m->ate_rmse_m = ev.merged_ate.trans_m.rmse;
@@ -337,13 +348,7 @@ void fillAccuracy(const eval::MultiAgentEval& ev, const eval::EvalParams& params
   m->rpe_delta_unit = params.rpe_delta_frames > 0 ? "frames" : "s";
   for (size_t i = 0; i < ev.agents.size(); ++i) {
     const eval::TrajectoryEval& a = ev.agents[i];
-    auto it = std::find_if(m->per_agent.begin(), m->per_agent.end(),
-                           [&](const AgentMetrics& x) { return x.agent == a.name; });
-    if (it == m->per_agent.end()) {
-      m->per_agent.push_back(AgentMetrics{});
-      it = m->per_agent.end() - 1;
-      it->agent = a.name;
-    }
+    AgentMetrics* it = &agentEntry(m, a.name);
     it->ate_rmse_m = a.ate.trans_m.rmse;
     it->ate_m = toAccuracy(a.ate.trans_m);
     if (i < ev.merged_per_agent_m.size()) it->merged_ate_rmse_m = ev.merged_per_agent_m[i].rmse;
@@ -354,6 +359,11 @@ void fillAccuracy(const eval::MultiAgentEval& ev, const eval::EvalParams& params
     it->matched_poses = int64_t(a.assoc.matched());
     it->unmatched_poses = int64_t(a.assoc.unmatched);
     if (a.ate.alignment.mode == eval::AlignMode::kSim3) it->scale = a.ate.alignment.scale;
+  }
+  for (const eval::AgentFailure& f : ev.failed) {  // listed, accuracy stays null
+    AgentMetrics& e = agentEntry(m, f.name);
+    e.ate_rmse_m.reset();
+    e.matched_poses = 0;
   }
 }
 

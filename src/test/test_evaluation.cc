@@ -335,3 +335,18 @@ TEST(EvalIo, ReadsEurocCsvAndDetectsFormats) {
   ASSERT_TRUE(real.ok()) << real.error();
   EXPECT_GT(real->size(), 90u);
 }
+
+TEST(MultiAgent, PartialEvaluationSkipsAnAgentWithoutGroundTruth) {
+  const Trajectory gt = helix(100, 0.1);
+  const Trajectory far = helix(100, 0.1, 500.0);
+  const std::vector<AgentTrajectories> agents = {{"ok", gt, gt}, {"lost", gt, far}};
+  EXPECT_FALSE(evaluateAgents(agents, EvalParams{}).ok());
+  auto ev = evaluateAgents(agents, EvalParams{}, /*allow_partial=*/true);
+  ASSERT_TRUE(ev.ok()) << ev.error();
+  ASSERT_EQ(ev->agents.size(), 1u);
+  ASSERT_EQ(ev->failed.size(), 1u);
+  EXPECT_EQ(ev->failed[0].name, "lost");
+  EXPECT_EQ(ev->matched, 100u);
+  EXPECT_LT(ev->merged_ate.trans_m.rmse, 1e-9);
+  EXPECT_FALSE(evaluateAgents({{"lost", gt, far}}, EvalParams{}, true).ok());
+}

@@ -69,8 +69,8 @@ TEST(TimingStats, MedianAndP95) {
   EXPECT_DOUBLE_EQ(s.at("pgo").median, 3.0);
   EXPECT_EQ(ts.count("pgo"), 2u);
   EXPECT_EQ(ts.count("nothing"), 0u);
-  EXPECT_DOUBLE_EQ(percentile({}, 50), 0.0);
-  EXPECT_DOUBLE_EQ(percentile({7}, 95), 7.0);
+  EXPECT_DOUBLE_EQ(timing::percentile({}, 50), 0.0);
+  EXPECT_DOUBLE_EQ(timing::percentile({7}, 95), 7.0);
 }
 
 TEST(MetricsJson, ContractKeysAlwaysPresentNullWhenNotApplicable) {

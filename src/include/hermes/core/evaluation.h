@@ -99,8 +99,14 @@ struct AgentTrajectories {
   Trajectory est;  ///< in the merged (common world) frame for a merged run
 };
 
+struct AgentFailure {
+  std::string name;
+  std::string error;
+};
+
 struct MultiAgentEval {
-  std::vector<TrajectoryEval> agents;  ///< each aligned on its own
+  std::vector<TrajectoryEval> agents;  ///< each aligned on its own (evaluated ones only)
+  std::vector<AgentFailure> failed;    ///< only with allow_partial
   Alignment merged_alignment;          ///< ONE transform for all agents' poses
   AteResult merged_ate;                ///< over all matched poses of all agents
   std::vector<ErrorStats> merged_per_agent_m;  ///< each agent's share of merged_ate
@@ -110,8 +116,11 @@ struct MultiAgentEval {
 /// Per-agent and merged evaluation. For the merged ATE every agent's matched
 /// (gt, est) poses are pooled and aligned with one transform (kFirstPose: the first
 /// agent's first pair), so an agent whose map is offset from the others shows up.
+/// Any agent that cannot be evaluated (e.g. nothing matched) is an error, unless
+/// allow_partial: then it is listed in `failed` and left out of the merged ATE (an
+/// error only when no agent can be evaluated).
 Expected<MultiAgentEval> evaluateAgents(const std::vector<AgentTrajectories>& agents,
-                                        const EvalParams& params);
+                                        const EvalParams& params, bool allow_partial = false);
 
 }  // namespace eval
 }  // namespace hermes

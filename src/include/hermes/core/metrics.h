@@ -44,8 +44,11 @@ class TimingStats {
   std::map<std::string, std::vector<double>> samples_;
 };
 
-/// Linear-interpolated percentile q in [0, 100] of values (0 when empty).
+namespace timing {
+/// Linear-interpolated percentile q in [0, 100] of values (0 when empty). In its own
+/// namespace so that `using namespace hermes` does not clash with local helpers.
 double percentile(std::vector<double> values, double q);
+}  // namespace timing
 
 /// Accuracy statistics written as extras ("ate": {...}, "rpe": {...}).
 struct AccuracyStats {
