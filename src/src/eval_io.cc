@@ -2,11 +2,15 @@
 
 #include <sys/stat.h>
 
+#include <Eigen/SVD>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
 #include <sstream>
+
+#include <yaml-cpp/yaml.h>
 
 namespace hermes {
 namespace eval {
@@ -82,6 +86,37 @@ Expected<TrajectoryFormat> detectTrajectoryFormat(const std::string& file) {
     return TrajectoryFormat::kTum;
   }
   return Error{"trajectory file '" + file + "' holds no poses"};
+}
+
+Expected<SE3> readEurocSensorExtrinsic(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return Error{"sensor file '" + path + "' cannot be opened"};
+  std::string text, line;
+  while (std::getline(in, line))
+    if (line.rfind('%', 0) != 0) text += line + "\n";  // drop OpenCV's %YAML:1.0
+  std::vector<double> d;
+  try {
+    const YAML::Node root = YAML::Load(text);
+    const YAML::Node data = root["T_BS"]["data"];
+    if (!data || !data.IsSequence())
+      return Error{"sensor file '" + path + "' has no list 'T_BS.data'"};
+    d = data.as<std::vector<double>>();
+  } catch (const YAML::Exception& e) {
+    return Error{"sensor file '" + path + "': " + e.what()};
+  }
+  if (d.size() != 16)
+    return Error{"sensor file '" + path + "': T_BS.data must hold 16 numbers, got " +
+                 std::to_string(d.size())};
+  Mat4 T;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) T(r, c) = d[size_t(4 * r + c)];
+  const Mat3 R = T.topLeftCorner<3, 3>();
+  if (!T.allFinite() || (R.transpose() * R - Mat3::Identity()).norm() > 1e-3 ||
+      R.determinant() < 0)
+    return Error{"sensor file '" + path + "': T_BS is not a rigid transform"};
+  // Re-orthonormalise (the file holds ~10 digits).
+  Eigen::JacobiSVD<Mat3> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  return SE3(Mat3(svd.matrixU() * svd.matrixV().transpose()), Vec3(T.topRightCorner<3, 1>()));
 }
 
 Expected<Trajectory> readTrajectoryForEval(const std::string& path) {

@@ -350,3 +350,27 @@ TEST(MultiAgent, PartialEvaluationSkipsAnAgentWithoutGroundTruth) {
   EXPECT_LT(ev->merged_ate.trans_m.rmse, 1e-9);
   EXPECT_FALSE(evaluateAgents({{"lost", gt, far}}, EvalParams{}, true).ok());
 }
+
+TEST(EvalIo, CameraEstimatesMapToTheBodyFrame) {
+  auto T_B_C = readEurocSensorExtrinsic(std::string(HERMES_SHARED_DATA_DIR) +
+                                        "/euroc_V1_01_micro/mav0/cam0/sensor.yaml");
+  ASSERT_TRUE(T_B_C.ok()) << T_B_C.error();
+  EXPECT_NEAR(T_B_C->translation().x(), -0.0216401454975, 1e-12);
+  EXPECT_NEAR(T_B_C->translation().y(), -0.064676986768, 1e-12);
+  // The camera trajectory differs from the body one by the lever arm; mapped back it
+  // evaluates to zero.
+  const Trajectory gt = helix(200, 0.05);
+  const Trajectory cam = transformTrajectory(gt, *T_B_C);
+  auto raw = evaluateTrajectory(gt, cam, EvalParams{});
+  ASSERT_TRUE(raw.ok());
+  EXPECT_GT(raw->ate.trans_m.rmse, 0.01);
+  auto body = evaluateTrajectory(gt, transformTrajectory(cam, T_B_C->inverse()), EvalParams{});
+  ASSERT_TRUE(body.ok());
+  EXPECT_LT(body->ate.trans_m.rmse, 1e-9);
+
+  const std::string bad = ::testing::TempDir() + "/bad_sensor.yaml";
+  std::ofstream(bad) << "%YAML:1.0\nT_BS:\n  data: [1, 0, 0]\n";
+  auto b = readEurocSensorExtrinsic(bad);
+  ASSERT_FALSE(b.ok());
+  EXPECT_NE(b.error().find("16 numbers"), std::string::npos) << b.error();
+}

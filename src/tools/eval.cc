@@ -33,6 +33,9 @@ const char* kUsage =
     "  --rpe-frames N      RPE pair spacing in matched poses (overrides --rpe-delta)\n"
     "  --rpe-tolerance F   drop a time-based RPE pair when its partner comes more than\n"
     "                      F * delta late (default 0.1; raise it for sparse keyframes)\n"
+    "  --est-cam YAML      estimates are poses of this camera (EuRoC sensor.yaml with\n"
+    "                      T_BS); they are mapped to the body frame of the ground\n"
+    "                      truth: T_W_B = T_W_C * T_BS^-1 (all pairs)\n"
     "  --name NAME         agent name for the next --est (default: file stem)\n"
     "  --json OUT          write the metrics JSON to OUT ('-' = stdout; the table then\n"
     "                      goes to stderr)\n"
@@ -74,7 +77,7 @@ void printStats(FILE* out, const char* label, const eval::ErrorStats& s, const c
 
 int main(int argc, char** argv) {
   std::vector<std::string> gts, ests, names;
-  std::string pending_name, json_out;
+  std::string pending_name, json_out, est_cam;
   eval::EvalParams params;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -107,6 +110,8 @@ int main(int argc, char** argv) {
       params.rpe_delta_frames = int(f);
     } else if (a == "--rpe-tolerance") {
       params.rpe_tolerance = parseNumber(a, value());
+    } else if (a == "--est-cam") {
+      est_cam = value();
     } else if (a == "--json") {
       json_out = value();
     } else {
@@ -120,6 +125,12 @@ int main(int argc, char** argv) {
   if (!pending_name.empty()) fail("--name must come before the --est it names");
   if (Status s = params.validate(); !s) fail(s.error());
 
+  SE3 T_C_B;  // identity unless --est-cam
+  if (!est_cam.empty()) {
+    auto T_B_C = eval::readEurocSensorExtrinsic(est_cam);
+    if (!T_B_C) fail(T_B_C.error());
+    T_C_B = T_B_C->inverse();
+  }
   std::vector<eval::AgentTrajectories> agents;
   for (size_t k = 0; k < gts.size(); ++k) {
     eval::AgentTrajectories at;
@@ -134,7 +145,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "[hermes_eval] read %s: %zu gt poses, %zu estimate poses\n",
                    at.name.c_str(), gt->size(), est->size());
     at.gt = std::move(*gt);
-    at.est = std::move(*est);
+    at.est = est_cam.empty() ? std::move(*est) : transformTrajectory(*est, T_C_B);
     agents.push_back(std::move(at));
   }
 

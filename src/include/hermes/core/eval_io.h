@@ -25,6 +25,10 @@ Expected<std::string> resolveTrajectoryPath(const std::string& path);
 /// (nanoseconds); TUM otherwise.
 Expected<TrajectoryFormat> detectTrajectoryFormat(const std::string& file);
 
+/// T_BS (body <- sensor) of a EuRoC sensor.yaml (`T_BS: {data: [16 numbers]}`;
+/// OpenCV's `%YAML:1.0` line is accepted). Errors name the file and the problem.
+Expected<SE3> readEurocSensorExtrinsic(const std::string& path);
+
 /// resolve + detect + read.
 Expected<Trajectory> readTrajectoryForEval(const std::string& path);
 
