@@ -1,0 +1,108 @@
+// Run metrics (DESIGN §7 metrics JSON contract), their JSON form, and a small
+// per-stage timing accumulator.
+//
+// JSON policy: every contract key (ate_rmse_m, per_agent, bytes_total, kBps_mean,
+// kBps_peak, loops_accepted, loops_rejected, agents_merged, timings_ms, and inside
+// each per_agent entry: agent, ate_rmse_m, lost_rate, keyframes, landmarks, bytes,
+// submaps_sent, submaps_applied, submaps_deferred) is ALWAYS written; a value that
+// does not apply to the run (e.g. loops without a server) is `null`. per_agent is a
+// list (possibly empty), timings_ms an object {stage: {median, p95, count}} (possibly
+// empty). Extra keys (ate, rpe, alignment, matched poses, ...) are OMITTED when they
+// do not apply. Reading requires every contract key (null allowed) and accepts
+// missing extras. kB = 1000 bytes.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <nlohmann/json_fwd.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hermes/core/evaluation.h"
+
+namespace hermes {
+
+/// Summary of one stage's timings [ms].
+struct StageTiming {
+  double median = 0;
+  double p95 = 0;
+  int64_t count = 0;
+};
+
+/// Collects durations per stage. Not thread-safe: keep one per thread and merge().
+class TimingStats {
+ public:
+  void add(const std::string& stage, double ms);
+  void merge(const TimingStats& other);
+  /// Median (mean of the two middle values for even counts) and p95 (linear
+  /// interpolation between closest ranks, like numpy's default).
+  std::map<std::string, StageTiming> summary() const;
+  size_t count(const std::string& stage) const;
+
+ private:
+  std::map<std::string, std::vector<double>> samples_;
+};
+
+namespace timing {
+/// Linear-interpolated percentile q in [0, 100] of values (0 when empty). In its own
+/// namespace so that `using namespace hermes` does not clash with local helpers.
+double percentile(std::vector<double> values, double q);
+}  // namespace timing
+
+/// Accuracy statistics written as extras ("ate": {...}, "rpe": {...}).
+struct AccuracyStats {
+  double rmse = 0, mean = 0, median = 0, max = 0, std = 0;
+};
+
+struct AgentMetrics {
+  // Contract fields.
+  std::string agent;
+  std::optional<double> ate_rmse_m;
+  std::optional<double> lost_rate;  ///< fraction of frames with tracking lost
+  std::optional<int64_t> keyframes, landmarks, bytes;
+  std::optional<int64_t> submaps_sent, submaps_applied, submaps_deferred;
+  // Extras.
+  std::optional<AccuracyStats> ate_m;           ///< "ate": own alignment
+  std::optional<double> merged_ate_rmse_m;      ///< under the run's common alignment
+  std::optional<double> rpe_trans_rmse_m, rpe_rot_rmse_deg;
+  std::optional<int64_t> matched_poses, unmatched_poses;
+  std::optional<double> scale;                  ///< sim3 only
+};
+
+struct RunMetrics {
+  // Contract fields.
+  std::optional<double> ate_rmse_m;  ///< merged trajectory, one common alignment
+  std::vector<AgentMetrics> per_agent;
+  std::optional<int64_t> bytes_total;
+  std::optional<double> kBps_mean, kBps_peak;
+  std::optional<int64_t> loops_accepted, loops_rejected, agents_merged;
+  std::map<std::string, StageTiming> timings_ms;
+  // Extras.
+  std::optional<std::string> alignment;  ///< "se3" | "sim3" | "first" | "none"
+  std::optional<SE3> T_gt_est;           ///< the common alignment transform
+  std::optional<double> scale;
+  std::optional<AccuracyStats> ate_m;    ///< merged
+  std::optional<int64_t> matched_poses, unmatched_poses;
+  std::optional<double> max_dt_s, rpe_delta;
+  std::optional<std::string> rpe_delta_unit;  ///< "s" | "frames"
+};
+
+void to_json(nlohmann::json& j, const RunMetrics& m);
+void to_json(nlohmann::json& j, const AgentMetrics& m);
+/// Throws std::invalid_argument (message names the field) on bad input; prefer
+/// metricsFromJson, which returns the error instead.
+void from_json(const nlohmann::json& j, RunMetrics& m);
+
+/// `source` (e.g. the file name) prefixes error messages.
+Expected<RunMetrics> metricsFromJson(const nlohmann::json& j, const std::string& source);
+std::string metricsToJsonString(const RunMetrics& m, int indent = 2);
+Status writeMetricsJson(const std::string& path, const RunMetrics& m);
+Expected<RunMetrics> readMetricsJson(const std::string& path);
+
+/// Fills the accuracy fields (ate, per-agent ate/rpe, alignment) from an evaluation;
+/// creates per_agent entries named after the evaluated agents when missing.
+void fillAccuracy(const eval::MultiAgentEval& ev, const eval::EvalParams& params,
+                  RunMetrics* m);
+
+}  // namespace hermes
