@@ -53,20 +53,20 @@ cv::Mat loadGray(const fs::path& p) {
   return img;
 }
 
-/// A revisit: random homography (corners moved by up to 12 % of the size,
-/// plus a rotation of up to 10 deg), brightness/contrast change and noise.
+/// A revisit: random homography (corners moved by up to 20 % of the size,
+/// plus a rotation of up to 25 deg), brightness/contrast change and noise.
 cv::Mat revisit(const cv::Mat& img, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const float w = static_cast<float>(img.cols), h = static_cast<float>(img.rows);
   std::vector<cv::Point2f> src = {{0, 0}, {w, 0}, {w, h}, {0, h}}, dst;
-  const double angle = u(rng) * 10.0 * CV_PI / 180.0;
+  const double angle = u(rng) * 25.0 * CV_PI / 180.0;
   const cv::Point2f c(w / 2, h / 2);
   for (const auto& p : src) {
     const cv::Point2f d = p - c;
     cv::Point2f r(static_cast<float>(std::cos(angle) * d.x - std::sin(angle) * d.y),
                   static_cast<float>(std::sin(angle) * d.x + std::cos(angle) * d.y));
     dst.push_back(c + r +
-                  cv::Point2f(static_cast<float>(u(rng) * 0.12 * w), static_cast<float>(u(rng) * 0.12 * h)));
+                  cv::Point2f(static_cast<float>(u(rng) * 0.2 * w), static_cast<float>(u(rng) * 0.2 * h)));
   }
   cv::Mat H = cv::getPerspectiveTransform(src, dst), warped;
   cv::warpPerspective(img, warped, H, img.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);

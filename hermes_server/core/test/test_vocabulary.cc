@@ -62,7 +62,7 @@ std::string tempPath(const std::string& name) {
 }  // namespace
 
 TEST(Vocabulary, SyntheticClustersMapToOneWordEach) {
-  for (std::uint64_t seed : {1u, 2u, 3u}) {
+  for (std::uint64_t seed = 1; seed <= 10; ++seed) {
     Synthetic s = makeSynthetic(100 + seed);
     VocabularyParams p;
     p.k = 10;
