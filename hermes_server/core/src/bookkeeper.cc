@@ -19,6 +19,12 @@ Status BookkeeperParams::read(const Config& c, const std::string& p) {
   return validate();
 }
 
+void BookkeeperParams::write(ConfigWriter& w, const std::string& p) const {
+  w.set(p + "require_registration", require_registration);
+  w.set(p + "anchor_min_keyframes", anchor_min_keyframes);
+  w.set(p + "stale_after_s", stale_after_s);
+}
+
 Status BookkeeperParams::validate() const {
   if (anchor_min_keyframes < 0)
     return Error{"server.bookkeeper.anchor_min_keyframes must be >= 0, got " +

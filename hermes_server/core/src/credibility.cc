@@ -17,6 +17,14 @@ Status CredibilityParams::read(const Config& c, const std::string& p) {
   return validate();
 }
 
+void CredibilityParams::write(ConfigWriter& w, const std::string& p) const {
+  w.set(p + "csa", std::string(enabled ? "on" : "off"));
+  w.set(p + "credibility.w_ts", w_ts);
+  w.set(p + "credibility.w_mc", w_mc);
+  w.set(p + "credibility.aging_per_s", aging_per_s);
+  w.set(p + "credibility.history", history);
+}
+
 Status CredibilityParams::validate() const {
   if (!(w_ts >= 0 && w_mc >= 0 && w_ts + w_mc > 0))
     return Error{"server.credibility: weights w_ts=" + std::to_string(w_ts) + ", w_mc=" +

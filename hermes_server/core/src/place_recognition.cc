@@ -24,6 +24,30 @@ Status PlaceRecognitionParams::read(const Config& c, const std::string& p) {
   return validate();
 }
 
+void PlaceRecognitionParams::write(ConfigWriter& w, const std::string& p) const {
+  w.set(p + "vocabulary", vocabulary_file);
+  w.set(p + "max_candidates", max_candidates);
+  w.set(p + "min_score", min_score);
+  w.set(p + "min_normalized_score", min_normalized_score);
+  w.set(p + "min_neighbour_score", min_neighbour_score);
+  w.set(p + "neighbour_id_distance", neighbour_id_distance);
+  w.set(p + "exclude_id_distance", exclude_id_distance);
+  w.set(p + "exclude_time_s", exclude_time_s);
+  w.set(p + "island_id_gap", island_id_gap);
+  w.set(p + "intra_agent", intra_agent);
+  w.set(p + "inter_agent", inter_agent);
+}
+
+Expected<std::shared_ptr<const Vocabulary>> loadVocabulary(const PlaceRecognitionParams& params,
+                                                           const std::string& base_dir) {
+  std::string path = params.vocabulary_file;
+  if (path.empty()) return Error{"server.place_recognition.vocabulary is empty"};
+  if (path.front() != '/' && !base_dir.empty()) path = base_dir + "/" + path;
+  auto voc = Vocabulary::load(path);
+  if (!voc) return Error{voc.error()};
+  return std::make_shared<const Vocabulary>(std::move(*voc));
+}
+
 Status PlaceRecognitionParams::validate() const {
   auto bad = [](const std::string& what) {
     return Status(Error{"server.place_recognition: " + what});

@@ -79,6 +79,13 @@ Status VocabularyParams::read(const Config& config, const std::string& prefix) {
   return validate();
 }
 
+void VocabularyParams::write(ConfigWriter& w, const std::string& p) const {
+  w.set(p + "k", k);
+  w.set(p + "levels", levels);
+  w.set(p + "max_iterations", max_iterations);
+  w.set(p + "seed", static_cast<int>(seed));
+}
+
 Status VocabularyParams::validate() const {
   if (k < 2 || k > 64) return Error{"vocabulary: k=" + std::to_string(k) + " must be in [2, 64]"};
   if (levels < 1 || levels > 8)

@@ -164,3 +164,32 @@ TEST(Credibility, CsaOffIsFifo) {
   w.w_ts = w.w_mc = 0;
   EXPECT_FALSE(w.validate().ok());
 }
+
+TEST(Credibility, ServerParamsRoundTripThroughConfig) {
+  CredibilityParams c;
+  c.enabled = false;
+  c.w_ts = 0.3;
+  c.w_mc = 0.9;
+  c.aging_per_s = 0.125;
+  BookkeeperParams b;
+  b.require_registration = true;
+  b.anchor_min_keyframes = 12;
+  b.stale_after_s = 7.5;
+  ConfigWriter w;
+  c.write(w);
+  b.write(w);
+  auto cfg = Config::fromString(w.yaml(), "written.yaml");
+  ASSERT_TRUE(cfg.ok()) << cfg.error() << "\n" << w.yaml();
+  CredibilityParams c2;
+  BookkeeperParams b2;
+  ASSERT_TRUE(c2.read(*cfg).ok());
+  ASSERT_TRUE(b2.read(*cfg).ok());
+  EXPECT_FALSE(c2.enabled);
+  EXPECT_DOUBLE_EQ(c2.w_ts, 0.3);
+  EXPECT_DOUBLE_EQ(c2.w_mc, 0.9);
+  EXPECT_DOUBLE_EQ(c2.aging_per_s, 0.125);
+  EXPECT_TRUE(b2.require_registration);
+  EXPECT_EQ(b2.anchor_min_keyframes, 12);
+  EXPECT_DOUBLE_EQ(b2.stale_after_s, 7.5);
+  EXPECT_TRUE(cfg->unusedKeys().empty());
+}

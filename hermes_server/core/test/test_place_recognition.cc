@@ -321,3 +321,27 @@ TEST(PlaceRecognition, BadInputIsAnError) {
   PlaceRecognitionParams p;
   EXPECT_FALSE(p.read(*cfg).ok());
 }
+
+TEST(PlaceRecognition, ParamsRoundTripAndVocabularyLoading) {
+  PlaceRecognitionParams p;
+  p.max_candidates = 7;
+  p.min_score = 0.125;
+  p.intra_agent = false;
+  ConfigWriter w;
+  p.write(w);
+  auto cfg = Config::fromString(w.yaml(), "written.yaml");
+  ASSERT_TRUE(cfg.ok()) << cfg.error();
+  PlaceRecognitionParams q;
+  ASSERT_TRUE(q.read(*cfg).ok());
+  EXPECT_EQ(q.max_candidates, 7);
+  EXPECT_DOUBLE_EQ(q.min_score, 0.125);
+  EXPECT_FALSE(q.intra_agent);
+  EXPECT_EQ(q.vocabulary_file, p.vocabulary_file);
+  auto voc = loadVocabulary(q, HERMES_SOURCE_DIR);
+  ASSERT_TRUE(voc.ok()) << voc.error();
+  EXPECT_GT((*voc)->wordCount(), 5000u);
+  q.vocabulary_file = "config/vocabulary/missing.bin";
+  auto missing = loadVocabulary(q, HERMES_SOURCE_DIR);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.error().find("missing.bin"), std::string::npos);
+}

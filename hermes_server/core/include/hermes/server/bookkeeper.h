@@ -51,6 +51,7 @@ struct BookkeeperParams {
   int anchor_min_keyframes = 30;  ///< keyframes every agent must have sent before the world is fixed
   double stale_after_s = 60.0;    ///< grace for late submaps of a superseded session [s]
   Status read(const Config& config, const std::string& prefix = "server.bookkeeper.");
+  void write(ConfigWriter& out, const std::string& prefix = "server.bookkeeper.") const;
   Status validate() const;
 };
 
@@ -114,6 +115,7 @@ struct AgentStats {
   double observationsPerLandmark() const;
 };
 
+/// Not thread-safe: the server's handler owns it and calls it from one thread.
 class Bookkeeper {
  public:
   explicit Bookkeeper(BookkeeperParams params = {});

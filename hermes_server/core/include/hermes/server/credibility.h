@@ -37,6 +37,7 @@ struct CredibilityParams {
   int history = 100000;       ///< pop records kept (oldest dropped)
   /// Reads server.csa and server.credibility.{w_ts, w_mc, aging_per_s, history}.
   Status read(const Config& config, const std::string& prefix = "server.");
+  void write(ConfigWriter& out, const std::string& prefix = "server.") const;
   Status validate() const;
   /// Seconds after which a waiting submap outranks every later arrival.
   double agingWindowS() const { return aging_per_s > 0 ? (w_ts + w_mc) / aging_per_s : -1; }
@@ -74,6 +75,7 @@ struct PopRecord {
   std::size_t queue_size = 0;  ///< items waiting before the pop
 };
 
+/// Not thread-safe: the server pipeline owns it and calls it from one thread.
 class CredibilityAssessor {
  public:
   explicit CredibilityAssessor(CredibilityParams params = {});

@@ -36,8 +36,14 @@ struct PlaceRecognitionParams {
   bool intra_agent = true;             ///< candidates from the query's own agent
   bool inter_agent = true;             ///< candidates from other agents
   Status read(const Config& config, const std::string& prefix = "server.place_recognition.");
+  void write(ConfigWriter& out, const std::string& prefix = "server.place_recognition.") const;
   Status validate() const;
 };
+
+/// Loads params.vocabulary_file; a relative path is taken relative to base_dir
+/// (normally the repository root). Errors name the file.
+Expected<std::shared_ptr<const Vocabulary>> loadVocabulary(const PlaceRecognitionParams& params,
+                                                           const std::string& base_dir);
 
 struct PlaceCandidate {
   KeyframeKey key;             ///< best keyframe of the island
@@ -55,6 +61,7 @@ struct PlaceQueryResult {
   int excluded = 0;                        ///< dropped as own recent / disabled scope
 };
 
+/// Not thread-safe: the server pipeline owns it and calls it from one thread.
 class PlaceRecognizer {
  public:
   PlaceRecognizer(std::shared_ptr<const Vocabulary> vocabulary, PlaceRecognitionParams params);

@@ -50,6 +50,7 @@ struct VocabularyParams {
   int max_iterations = 10;  ///< k-medians iterations per node
   std::uint64_t seed = 1;   ///< seeding RNG
   Status read(const Config& config, const std::string& prefix = "vocabulary.");
+  void write(ConfigWriter& out, const std::string& prefix = "vocabulary.") const;
   Status validate() const;
 };
 
