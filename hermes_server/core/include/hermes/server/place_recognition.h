@@ -32,7 +32,7 @@ struct PlaceRecognitionParams {
   int neighbour_id_distance = 3;       ///< temporal neighbours for the normaliser [ids]
   int exclude_id_distance = 20;        ///< own keyframes this close are excluded [ids]
   double exclude_time_s = 10.0;        ///< own keyframes this recent are excluded [s]
-  int island_id_gap = 3;               ///< max id step inside an island
+  int island_id_gap = 5;               ///< max id step inside an island (trimming leaves gaps)
   bool intra_agent = true;             ///< candidates from the query's own agent
   bool inter_agent = true;             ///< candidates from other agents
   Status read(const Config& config, const std::string& prefix = "server.place_recognition.");
