@@ -1,0 +1,164 @@
+// Server bookkeeping: agents, sessions, submap deduplication, per-agent stats
+// and the global (world) frame rule.
+//
+// Agents: a uuid gets a robot id (0, 1, 2, ... in order of first contact) that
+// stays the same across reconnects and restarts. Registration is implicit by
+// default (the first submap of an unknown uuid registers it); with
+// server.bookkeeper.require_registration = true an unknown uuid's submaps are
+// rejected until registerAgent() was called (e.g. on a heartbeat / hello).
+//
+// Sessions: an agent that restarts or resets its map sends a higher session
+// number. Keyframe keys are (robot id, session, keyframe id), so keyframe ids
+// reused by the new session never collide with the old ones, whose data is
+// kept. The current session is the highest one seen.
+//
+// Arrival verdicts for (uuid, session, seq):
+//   accept      first time seen (any order: out-of-order seqs are accepted and
+//               the gaps are counted as missing until they arrive)
+//   duplicate   already accepted: acknowledge again, do not apply
+//   stale       a session older than the agent's current one, arriving more than
+//               stale_after_s after the current session began (late spool
+//               resends of an abandoned map): acknowledge, do not apply
+//   rejected    unknown agent while registration is required, or a malformed
+//               header (e.g. nil uuid): do not acknowledge
+//
+// Global frame: once every registered agent has accepted >= anchor_min_keyframes
+// keyframes, selectWorld() makes the most credible agent's frame the world frame
+// (T_W_A = identity, anchored). Another agent is anchored by markAnchored(agent,
+// T_W_A) when a verified loop ties it to an anchored agent.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <optional>
+#include <set>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "hermes/core/config.h"
+#include "hermes/core/geometry.h"
+#include "hermes/core/map_types.h"
+#include "hermes/core/status.h"
+
+namespace hermes {
+
+using RobotId = std::uint32_t;
+
+struct BookkeeperParams {
+  bool require_registration = false;
+  int anchor_min_keyframes = 30;  ///< keyframes every agent must have sent before the world is fixed
+  double stale_after_s = 60.0;    ///< grace for late submaps of a superseded session [s]
+  Status read(const Config& config, const std::string& prefix = "server.bookkeeper.");
+  void write(ConfigWriter& out, const std::string& prefix = "server.bookkeeper.") const;
+  Status validate() const;
+};
+
+/// What the bookkeeper needs to know about an arriving submap.
+struct SubmapArrival {
+  SubmapHeader header;
+  std::size_t bytes = 0;         ///< encoded size as received
+  std::size_t keyframes = 0;
+  std::size_t landmarks = 0;
+  std::size_t observations = 0;  ///< landmark observations
+  static SubmapArrival of(const Submap& submap, std::size_t bytes);
+};
+
+enum class ArrivalVerdict { kAccept, kDuplicate, kStale, kRejected };
+const char* toString(ArrivalVerdict v);
+
+struct ArrivalDecision {
+  ArrivalVerdict verdict = ArrivalVerdict::kRejected;
+  RobotId robot = 0;
+  bool new_agent = false;    ///< this arrival registered the agent
+  bool new_session = false;  ///< first submap of a session higher than any before
+  bool acknowledge = false;  ///< send an ack (accept, duplicate, stale)
+  std::string reason;        ///< for duplicate / stale / rejected: names the agent (uuid)
+};
+
+struct SessionStats {
+  std::uint64_t submaps_accepted = 0;
+  std::uint64_t highest_seq = 0;   ///< highest accepted seq
+  std::uint64_t lowest_seq = 0;    ///< lowest accepted seq
+  std::uint64_t keyframes = 0;
+  double first_time = 0, last_time = 0;
+};
+
+struct AgentStats {
+  RobotId robot = 0;
+  Uuid uuid{};
+  std::string name;
+  std::uint32_t current_session = 0;
+  double current_session_since = 0;       ///< when the current session first arrived [s]
+  std::uint64_t submaps_received = 0;     ///< every arrival, including duplicates
+  std::uint64_t submaps_accepted = 0;
+  std::uint64_t submaps_applied = 0;
+  std::uint64_t submaps_duplicate = 0;
+  std::uint64_t submaps_stale = 0;
+  std::uint64_t submaps_missing = 0;      ///< seq gaps not (yet) filled, over all sessions
+  std::uint64_t bytes_received = 0;       ///< every arrival
+  std::uint64_t bytes_accepted = 0;
+  std::uint64_t keyframes = 0;            ///< in accepted submaps
+  std::uint64_t landmarks = 0;
+  std::uint64_t observations = 0;
+  double first_time = -1, last_time = -1; ///< first / last arrival [s]
+  bool anchored = false;
+  SE3 T_W_A;                              ///< valid when anchored
+  std::map<std::uint32_t, SessionStats> sessions;
+
+  /// Accepted / (accepted + missing) seqs: delivery success as the server sees it.
+  double successRate() const;
+  /// Accepted bytes per second over [first_time, last_time] (0 for one arrival).
+  double bytesPerSecond() const;
+  /// Mean observations per landmark over accepted submaps.
+  double observationsPerLandmark() const;
+};
+
+/// Not thread-safe: the server's handler owns it and calls it from one thread.
+class Bookkeeper {
+ public:
+  explicit Bookkeeper(BookkeeperParams params = {});
+
+  /// Registers (or re-registers after reconnect) an agent; the robot id is stable.
+  Expected<RobotId> registerAgent(const Uuid& uuid, double now, const std::string& name = "");
+  std::optional<RobotId> robotOf(const Uuid& uuid) const;
+
+  /// Decides what to do with an arriving submap and updates the stats.
+  ArrivalDecision onArrival(const SubmapArrival& arrival, double now);
+  /// The merger applied an accepted submap.
+  Status markApplied(RobotId robot, std::uint32_t session, std::uint64_t seq);
+
+  KeyframeKey key(RobotId robot, std::uint32_t session, KeyframeId id) const {
+    return KeyframeKey{robot, session, id};
+  }
+
+  /// Fixes the world frame once every agent has enough keyframes: the agent with the
+  /// highest credibility (ties: lowest robot id) is anchored with T_W_A = identity.
+  /// Returns the world agent (also when it was fixed before), nullopt while waiting.
+  std::optional<RobotId> selectWorld(const std::function<double(RobotId)>& credibility);
+  /// Anchors (or re-anchors) an agent whose frame a verified loop tied to the world.
+  Status markAnchored(RobotId robot, const SE3& T_W_A);
+  std::optional<RobotId> worldAgent() const { return world_; }
+  bool anchored(RobotId robot) const;
+  std::optional<SE3> T_W_A(RobotId robot) const;
+
+  const AgentStats* stats(RobotId robot) const;
+  std::vector<RobotId> robots() const;
+  const BookkeeperParams& params() const { return params_; }
+  /// "agent 1 (uuid ...)" for messages.
+  std::string describe(RobotId robot) const;
+
+ private:
+  struct SeqTracker {
+    std::set<std::uint64_t> seen;  ///< accepted seqs (small: one per 5 s window)
+  };
+  BookkeeperParams params_;
+  std::map<Uuid, RobotId> robot_of_;
+  std::vector<AgentStats> agents_;  ///< indexed by robot id
+  std::map<std::pair<RobotId, std::uint32_t>, SeqTracker> seqs_;
+  std::set<std::tuple<RobotId, std::uint32_t, std::uint64_t>> applied_;
+  std::optional<RobotId> world_;
+};
+
+}  // namespace hermes

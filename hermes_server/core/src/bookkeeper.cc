@@ -1,0 +1,257 @@
+// Agents, sessions, deduplication, stats and the world-frame rule.
+#include "hermes/server/bookkeeper.h"
+
+#include <algorithm>
+
+namespace hermes {
+
+namespace {
+bool isNil(const Uuid& u) {
+  return std::all_of(u.begin(), u.end(), [](std::uint8_t b) { return b == 0; });
+}
+}  // namespace
+
+Status BookkeeperParams::read(const Config& c, const std::string& p) {
+  for (auto s : {c.get(p + "require_registration", &require_registration),
+                 c.get(p + "anchor_min_keyframes", &anchor_min_keyframes),
+                 c.get(p + "stale_after_s", &stale_after_s)})
+    if (!s) return s;
+  return validate();
+}
+
+void BookkeeperParams::write(ConfigWriter& w, const std::string& p) const {
+  w.set(p + "require_registration", require_registration);
+  w.set(p + "anchor_min_keyframes", anchor_min_keyframes);
+  w.set(p + "stale_after_s", stale_after_s);
+}
+
+Status BookkeeperParams::validate() const {
+  if (anchor_min_keyframes < 0)
+    return Error{"server.bookkeeper.anchor_min_keyframes must be >= 0, got " +
+                 std::to_string(anchor_min_keyframes)};
+  if (!(stale_after_s >= 0))
+    return Error{"server.bookkeeper.stale_after_s must be >= 0, got " +
+                 std::to_string(stale_after_s)};
+  return Status::Ok();
+}
+
+SubmapArrival SubmapArrival::of(const Submap& submap, std::size_t bytes) {
+  SubmapArrival a;
+  a.header = submap.header;
+  a.bytes = bytes;
+  a.keyframes = submap.keyframes.size();
+  a.landmarks = submap.landmarks.size();
+  a.observations = submap.observationCount();
+  return a;
+}
+
+const char* toString(ArrivalVerdict v) {
+  switch (v) {
+    case ArrivalVerdict::kAccept: return "accept";
+    case ArrivalVerdict::kDuplicate: return "duplicate";
+    case ArrivalVerdict::kStale: return "stale";
+    case ArrivalVerdict::kRejected: return "rejected";
+  }
+  return "?";
+}
+
+double AgentStats::successRate() const {
+  const double total = static_cast<double>(submaps_accepted + submaps_missing);
+  return total > 0 ? static_cast<double>(submaps_accepted) / total : 0.0;
+}
+
+double AgentStats::bytesPerSecond() const {
+  const double span = last_time - first_time;
+  return span > 0 ? static_cast<double>(bytes_accepted) / span : 0.0;
+}
+
+double AgentStats::observationsPerLandmark() const {
+  return landmarks > 0 ? static_cast<double>(observations) / static_cast<double>(landmarks) : 0.0;
+}
+
+Bookkeeper::Bookkeeper(BookkeeperParams params) : params_(std::move(params)) {
+  Status s = params_.validate();
+  HERMES_CHECK(s.ok(), s.error());
+}
+
+std::string Bookkeeper::describe(RobotId robot) const {
+  if (robot >= agents_.size()) return "agent " + std::to_string(robot) + " (unknown)";
+  return "agent " + std::to_string(robot) + " (uuid " + toString(agents_[robot].uuid) + ")";
+}
+
+Expected<RobotId> Bookkeeper::registerAgent(const Uuid& uuid, double now, const std::string& name) {
+  if (isNil(uuid)) return Error{"bookkeeper: cannot register the nil uuid"};
+  auto it = robot_of_.find(uuid);
+  if (it != robot_of_.end()) {  // reconnect: same robot id
+    if (!name.empty()) agents_[it->second].name = name;
+    return it->second;
+  }
+  const auto robot = static_cast<RobotId>(agents_.size());
+  AgentStats a;
+  a.robot = robot;
+  a.uuid = uuid;
+  a.name = name.empty() ? "agent_" + std::to_string(robot) : name;
+  a.first_time = a.last_time = -1;
+  (void)now;
+  agents_.push_back(std::move(a));
+  robot_of_[uuid] = robot;
+  return robot;
+}
+
+std::optional<RobotId> Bookkeeper::robotOf(const Uuid& uuid) const {
+  auto it = robot_of_.find(uuid);
+  if (it == robot_of_.end()) return std::nullopt;
+  return it->second;
+}
+
+ArrivalDecision Bookkeeper::onArrival(const SubmapArrival& arrival, double now) {
+  ArrivalDecision d;
+  const SubmapHeader& h = arrival.header;
+  const std::string who = "submap (uuid " + toString(h.agent) + ", session " +
+                          std::to_string(h.session) + ", seq " + std::to_string(h.seq) + ")";
+  if (isNil(h.agent)) {
+    d.reason = who + ": nil agent uuid";
+    return d;
+  }
+  auto known = robotOf(h.agent);
+  if (!known) {
+    if (params_.require_registration) {
+      d.reason = who + ": agent uuid " + toString(h.agent) + " is not registered";
+      return d;
+    }
+    auto r = registerAgent(h.agent, now);
+    if (!r) {
+      d.reason = who + ": " + r.error();
+      return d;
+    }
+    known = *r;
+    d.new_agent = true;
+  }
+  d.robot = *known;
+  AgentStats& a = agents_[d.robot];
+  ++a.submaps_received;
+  a.bytes_received += arrival.bytes;
+  if (a.first_time < 0) a.first_time = now;
+  a.last_time = std::max(a.last_time, now);
+  d.acknowledge = true;
+
+  SeqTracker& seqs = seqs_[{d.robot, h.session}];
+  if (seqs.seen.count(h.seq)) {
+    ++a.submaps_duplicate;
+    d.verdict = ArrivalVerdict::kDuplicate;
+    d.reason = who + " of " + describe(d.robot) + " was already received";
+    return d;
+  }
+  const bool first_submap = a.sessions.empty();
+  if (!first_submap && h.session < a.current_session &&
+      now - a.current_session_since > params_.stale_after_s) {
+    ++a.submaps_stale;
+    d.verdict = ArrivalVerdict::kStale;
+    d.reason = who + " of " + describe(d.robot) + " belongs to superseded session " +
+               std::to_string(h.session) + " (current " + std::to_string(a.current_session) +
+               " since " + std::to_string(now - a.current_session_since) + " s)";
+    return d;
+  }
+  if (first_submap || h.session > a.current_session) {
+    d.new_session = true;
+    a.current_session = h.session;
+    a.current_session_since = now;
+  }
+
+  // Accept. Missing = holes between the lowest and highest accepted seq.
+  SessionStats& s = a.sessions[h.session];
+  const std::uint64_t holes_before =
+      s.submaps_accepted ? (s.highest_seq - s.lowest_seq + 1) - s.submaps_accepted : 0;
+  seqs.seen.insert(h.seq);
+  if (s.submaps_accepted == 0) {
+    s.lowest_seq = s.highest_seq = h.seq;
+    s.first_time = now;
+  }
+  s.lowest_seq = std::min(s.lowest_seq, h.seq);
+  s.highest_seq = std::max(s.highest_seq, h.seq);
+  ++s.submaps_accepted;
+  s.keyframes += arrival.keyframes;
+  s.last_time = std::max(s.last_time, now);
+  const std::uint64_t holes_after = (s.highest_seq - s.lowest_seq + 1) - s.submaps_accepted;
+  a.submaps_missing = a.submaps_missing + holes_after - holes_before;
+
+  ++a.submaps_accepted;
+  a.bytes_accepted += arrival.bytes;
+  a.keyframes += arrival.keyframes;
+  a.landmarks += arrival.landmarks;
+  a.observations += arrival.observations;
+  d.verdict = ArrivalVerdict::kAccept;
+  return d;
+}
+
+Status Bookkeeper::markApplied(RobotId robot, std::uint32_t session, std::uint64_t seq) {
+  if (robot >= agents_.size())
+    return Error{"bookkeeper: markApplied for unknown robot id " + std::to_string(robot)};
+  auto it = seqs_.find({robot, session});
+  if (it == seqs_.end() || !it->second.seen.count(seq))
+    return Error{"bookkeeper: " + describe(robot) + " session " + std::to_string(session) +
+                 " seq " + std::to_string(seq) + " was never accepted"};
+  if (!applied_.insert({robot, session, seq}).second)
+    return Error{"bookkeeper: " + describe(robot) + " session " + std::to_string(session) +
+                 " seq " + std::to_string(seq) + " was already applied"};
+  ++agents_[robot].submaps_applied;
+  return Status::Ok();
+}
+
+std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotId)>& credibility) {
+  if (world_) return world_;
+  if (agents_.empty()) return std::nullopt;
+  for (const AgentStats& a : agents_)
+    if (a.keyframes < static_cast<std::uint64_t>(params_.anchor_min_keyframes)) return std::nullopt;
+  RobotId best = 0;
+  double best_c = credibility ? credibility(0) : 0.0;
+  for (RobotId r = 1; r < agents_.size(); ++r) {
+    const double c = credibility ? credibility(r) : 0.0;
+    if (c > best_c) {
+      best_c = c;
+      best = r;
+    }
+  }
+  world_ = best;
+  agents_[best].anchored = true;
+  agents_[best].T_W_A = SE3::identity();
+  return world_;
+}
+
+Status Bookkeeper::markAnchored(RobotId robot, const SE3& T_W_A) {
+  if (robot >= agents_.size())
+    return Error{"bookkeeper: markAnchored for unknown robot id " + std::to_string(robot)};
+  if (!world_)
+    return Error{"bookkeeper: cannot anchor " + describe(robot) +
+                 ": the world frame is not fixed yet"};
+  if (robot == *world_ &&
+      (!T_W_A.translation().isZero(1e-9) || rotationAngle(T_W_A.rotation()) > 1e-9))
+    return Error{"bookkeeper: " + describe(robot) +
+                 " defines the world frame; its T_W_A must stay identity"};
+  if (!T_W_A.translation().allFinite() || !T_W_A.quat().coeffs().allFinite())
+    return Error{"bookkeeper: non-finite T_W_A for " + describe(robot)};
+  agents_[robot].anchored = true;
+  agents_[robot].T_W_A = T_W_A;
+  return Status::Ok();
+}
+
+bool Bookkeeper::anchored(RobotId robot) const {
+  return robot < agents_.size() && agents_[robot].anchored;
+}
+
+std::optional<SE3> Bookkeeper::T_W_A(RobotId robot) const {
+  if (!anchored(robot)) return std::nullopt;
+  return agents_[robot].T_W_A;
+}
+
+const AgentStats* Bookkeeper::stats(RobotId robot) const {
+  return robot < agents_.size() ? &agents_[robot] : nullptr;
+}
+
+std::vector<RobotId> Bookkeeper::robots() const {
+  std::vector<RobotId> out;
+  for (RobotId r = 0; r < agents_.size(); ++r) out.push_back(r);
+  return out;
+}
+
+}  // namespace hermes
