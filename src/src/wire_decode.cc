@@ -119,11 +119,11 @@ void readCameras(BodyReader& r, Submap* s) {
 void readKeyframe(BodyReader& r, std::size_t i, KeyframeId prev, Keyframe* kf,
                   std::vector<float>* column) {
   const auto what = [i] { return "keyframe #" + str(i); };
-  kf->id = unzigzagDelta(r.varint(what), prev);
+  kf->id = unzigzagDelta(r.varint([&] { return what() + " id"; }), prev);
   kf->stamp = r.scalar<double>(what);
   if (!std::isfinite(kf->stamp)) r.fail(what() + " stamp is not finite");
   kf->T_A_C = r.pose([&] { return what() + " pose"; });
-  const std::uint64_t camera = r.varint(what);
+  const std::uint64_t camera = r.varint([&] { return what() + " camera id"; });
   if (camera > std::numeric_limits<std::uint32_t>::max()) r.fail(what() + " camera id overflows");
   kf->camera_id = static_cast<std::uint32_t>(camera);
   const std::size_t n =
@@ -158,7 +158,7 @@ void readLandmarks(BodyReader& r, Submap* s) {
   for (std::size_t j = 0; j < n; ++j) {
     Landmark& lm = s->landmarks[j];
     const auto what = [j] { return "landmark #" + str(j); };
-    lm.id = unzigzagDelta(r.varint(what), prev);
+    lm.id = unzigzagDelta(r.varint([&] { return what() + " id"; }), prev);
     prev = lm.id;
     float p[3];
     r.array(p, 3, what);
@@ -173,7 +173,7 @@ void readLandmarks(BodyReader& r, Submap* s) {
       const std::uint32_t k =
           r.index(s->keyframes.size(), [&] { return ob_what() + " keyframe index"; });
       Keyframe& kf = s->keyframes[k];
-      const std::uint64_t kp = r.varint(ob_what);
+      const std::uint64_t kp = r.varint([&] { return ob_what() + " keypoint index"; });
       if (kp >= kf.keypoints.size())
         r.fail(ob_what() + " keypoint " + str(kp) + " is out of range (keyframe " +
                str(kf.id) + " has " + str(kf.keypoints.size()) + ")");
