@@ -17,7 +17,9 @@ namespace {
 class BodyReader {
  public:
   BodyReader(const std::uint8_t* data, std::size_t size)
-      : buf_(data, size), is_(&buf_), ar_(is_, Archive::Options::LittleEndian()) {}
+      : buf_(data, size), is_(&buf_), ar_(is_, Archive::Options::Default()) {}
+  // (Input options name the *host* order; cereal swaps when the stream's marker
+  // differs from it, so little-endian bodies also load on big-endian hosts.)
 
   std::size_t offset() const { return buf_.offset(); }
   std::size_t remaining() const { return buf_.remaining(); }

@@ -86,8 +86,8 @@ void sealFrame(std::vector<std::uint8_t>* frame, const SubmapHeader& routing,
 
 }  // namespace wire
 
-Expected<FrameHeader> peekFrame(const std::uint8_t* data, std::size_t size,
-                                const DecodeLimits& limits) {
+Expected<FrameHeader> parseFrameHeader(const std::uint8_t* data, std::size_t size,
+                                       const DecodeLimits& limits) {
   using namespace wire;
   if (size >= 4 && !std::equal(kMagic, kMagic + 4, data)) return Error{"wire: bad magic"};
   if (size < kWireFixedBytes)
@@ -113,6 +113,21 @@ Expected<FrameHeader> peekFrame(const std::uint8_t* data, std::size_t size,
   if (!h.compressed() && h.raw_bytes != h.body_bytes)
     return Error{"wire: uncompressed frame with body length " + std::to_string(h.body_bytes) +
                  " but raw length " + std::to_string(h.raw_bytes)};
+  const std::uint8_t* r = data + kWireFrameHeaderBytes;
+  std::copy(r, r + 16, h.routing.agent.begin());
+  h.routing.session = static_cast<std::uint32_t>(getLE(r + 16, 4));
+  h.routing.seq = getLE(r + 20, 8);
+  h.routing.t_start = bitsDouble(getLE(r + 28, 8));
+  h.routing.t_end = bitsDouble(getLE(r + 36, 8));
+  return h;
+}
+
+Expected<FrameHeader> peekFrame(const std::uint8_t* data, std::size_t size,
+                                const DecodeLimits& limits) {
+  using namespace wire;
+  Expected<FrameHeader> parsed = parseFrameHeader(data, size, limits);
+  if (!parsed) return parsed;
+  const FrameHeader& h = *parsed;
   if (size < h.frameBytes())
     return Error{"wire: frame truncated: header says " + std::to_string(h.frameBytes()) +
                  " bytes, have " + std::to_string(size)};
@@ -123,15 +138,9 @@ Expected<FrameHeader> peekFrame(const std::uint8_t* data, std::size_t size,
   if (crc != h.crc)
     return Error{"wire: CRC mismatch (header says " + hex32(h.crc) + ", computed " + hex32(crc) +
                  ")"};
-  const std::uint8_t* r = data + kWireFrameHeaderBytes;
-  std::copy(r, r + 16, h.routing.agent.begin());
-  h.routing.session = static_cast<std::uint32_t>(getLE(r + 16, 4));
-  h.routing.seq = getLE(r + 20, 8);
-  h.routing.t_start = bitsDouble(getLE(r + 28, 8));
-  h.routing.t_end = bitsDouble(getLE(r + 36, 8));
   if (!std::isfinite(h.routing.t_start) || !std::isfinite(h.routing.t_end))
     return Error{"wire: routing header window stamps are not finite"};
-  return h;
+  return parsed;
 }
 
 Expected<Submap> decodeSubmap(const std::uint8_t* data, std::size_t size,

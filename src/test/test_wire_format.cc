@@ -589,3 +589,29 @@ TEST(WireFormat, KeypointLinksAreRebuiltFromObservations) {
   kf.keypoint_landmark[k] = kInvalidId;
   EXPECT_EQ(d->keyframes[0].keypoint_landmark, kf.keypoint_landmark);
 }
+
+TEST(WireFormat, StreamOfFramesSplitsByParsedHeader) {
+  std::vector<std::uint8_t> stream;
+  for (std::uint64_t seed : {11u, 12u, 13u}) {
+    WireOptions o;
+    o.zstd = seed == 12;
+    const auto f = encodeOk(smallSubmap(seed), o);
+    stream.insert(stream.end(), f.begin(), f.end());
+  }
+  std::size_t at = 0;
+  int frames = 0;
+  while (at < stream.size()) {
+    // Only the fixed header is needed to learn the frame length.
+    auto h = parseFrameHeader(stream.data() + at, kWireFixedBytes);
+    ASSERT_TRUE(h.ok()) << h.error();
+    ASSERT_LE(at + h->frameBytes(), stream.size());
+    auto d = decodeSubmap(stream.data() + at, h->frameBytes());
+    ASSERT_TRUE(d.ok()) << d.error();
+    EXPECT_EQ(d->header.seq, smallSubmap(11 + frames).header.seq);
+    at += h->frameBytes();
+    ++frames;
+  }
+  EXPECT_EQ(frames, 3);
+  EXPECT_FALSE(peekFrame(stream.data(), stream.size()).ok());  // peek wants one whole frame
+  EXPECT_NE(parseFrameHeader(stream.data(), 10).error().find("truncated"), std::string::npos);
+}

@@ -47,6 +47,8 @@
 //   that observation, is not transmitted (it decodes as kInvalidId).
 // * Keypoint columns are stored per field (all u, all v, ...), which compresses
 //   better and lets cereal move each column in one call.
+// * No bag-of-words vector is sent: the server computes it from the descriptors
+//   with its own vocabulary, so vocabulary changes never touch the wire.
 //
 // Decoding never trusts a count: before anything is reserved, count × (minimum
 // encoded size of one element) must fit in the bytes that remain, so a crafted
@@ -122,6 +124,13 @@ WireStats wireStats(const Submap& submap);
 
 /// Exact size of the uncompressed frame; equals encodeSubmap(s).size() without zstd.
 std::size_t encodedSizeUncompressed(const Submap& submap);
+
+/// Parses the fixed 64 bytes at the start of `data` (which may hold more than one
+/// frame, or only the start of one): checks magic, version, flags and the limits,
+/// but NOT the CRC, so the routing info is unverified. For stream readers that
+/// must learn frameBytes() before the whole frame has arrived.
+Expected<FrameHeader> parseFrameHeader(const std::uint8_t* data, std::size_t size,
+                                       const DecodeLimits& limits = {});
 
 /// Checks the fixed header, the frame length and the CRC, and returns the header
 /// with its routing info, without decoding or decompressing the body.
