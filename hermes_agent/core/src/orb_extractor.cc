@@ -157,33 +157,49 @@ void OrbExtractor::detectLevel(const cv::Mat& img, int octave,
   if (w <= 0 || h <= 0 || budget_[octave] == 0) return;
   const int ncols = std::max(1, w / params_.cell_size);
   const int nrows = std::max(1, h / params_.cell_size);
-  std::vector<cv::KeyPoint> all, cell_kps;
-  all.reserve(size_t(budget_[octave]) * 4);
+  auto colOf = [&](float x) {
+    int c = std::clamp(int((x - x0) * ncols / w), 0, ncols - 1);
+    while (c > 0 && x < x0 + c * w / ncols) --c;
+    while (c + 1 < ncols && x >= x0 + (c + 1) * w / ncols) ++c;
+    return c;
+  };
+  auto rowOf = [&](float y) {
+    int r = std::clamp(int((y - y0) * nrows / h), 0, nrows - 1);
+    while (r > 0 && y < y0 + r * h / nrows) --r;
+    while (r + 1 < nrows && y >= y0 + (r + 1) * h / nrows) ++r;
+    return r;
+  };
+  // Adaptive threshold per cell: one FAST pass over the level at the high
+  // threshold (reaching kFastMargin px into the border so that corners on the
+  // edge of the detection area can be scored); cells left without a corner are
+  // searched again, alone, at the low threshold. The FAST score does not depend
+  // on the threshold, so this equals running FAST cell by cell with a retry.
+  const cv::Rect roi(x0 - kFastMargin, y0 - kFastMargin, w + 2 * kFastMargin,
+                     h + 2 * kFastMargin);
+  std::vector<cv::KeyPoint> found, all;
+  cv::FAST(img(roi), found, params_.fast_threshold, true);
+  std::vector<char> has(size_t(ncols) * nrows, 0);
+  all.reserve(found.size() + 64);
+  for (auto& k : found) {
+    k.pt.x += float(roi.x);
+    k.pt.y += float(roi.y);
+    if (k.pt.x < x0 || k.pt.y < y0 || k.pt.x >= x0 + w || k.pt.y >= y0 + h) continue;
+    has[size_t(rowOf(k.pt.y)) * ncols + colOf(k.pt.x)] = 1;
+    all.push_back(k);
+  }
   for (int r = 0; r < nrows; ++r) {
     const int cy0 = y0 + r * h / nrows, cy1 = y0 + (r + 1) * h / nrows;
     for (int c = 0; c < ncols; ++c) {
+      if (has[size_t(r) * ncols + c]) continue;
       const int cx0 = x0 + c * w / ncols, cx1 = x0 + (c + 1) * w / ncols;
-      // The ROI reaches kFastMargin px beyond the cell so that corners on the
-      // cell edge can be scored; those outside the cell are left to neighbours.
-      const cv::Rect roi(cx0 - kFastMargin, cy0 - kFastMargin, cx1 - cx0 + 2 * kFastMargin,
-                         cy1 - cy0 + 2 * kFastMargin);
-      const cv::Mat sub = img(roi);
-      auto inside = [&](const cv::KeyPoint& k) {
-        const float x = k.pt.x + roi.x, y = k.pt.y + roi.y;
-        return x >= cx0 && x < cx1 && y >= cy0 && y < cy1;
-      };
-      bool found = false;
-      for (int th : {params_.fast_threshold, params_.fast_min_threshold}) {
-        cell_kps.clear();
-        cv::FAST(sub, cell_kps, th, true);
-        for (auto& k : cell_kps) {
-          if (!inside(k)) continue;
-          k.pt.x += float(roi.x);
-          k.pt.y += float(roi.y);
-          all.push_back(k);
-          found = true;
-        }
-        if (found || th == params_.fast_min_threshold) break;
+      const cv::Rect cell(cx0 - kFastMargin, cy0 - kFastMargin, cx1 - cx0 + 2 * kFastMargin,
+                          cy1 - cy0 + 2 * kFastMargin);
+      found.clear();
+      cv::FAST(img(cell), found, params_.fast_min_threshold, true);
+      for (auto& k : found) {
+        k.pt.x += float(cell.x);
+        k.pt.y += float(cell.y);
+        if (k.pt.x >= cx0 && k.pt.x < cx1 && k.pt.y >= cy0 && k.pt.y < cy1) all.push_back(k);
       }
     }
   }

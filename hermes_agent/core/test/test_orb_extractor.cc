@@ -140,3 +140,26 @@ TEST(OrbExtractor, RejectsBadInputAndParams) {
   EXPECT_EQ(p.num_features, 500);
   EXPECT_DOUBLE_EQ(p.scale_factor, 1.3);
 }
+
+TEST(OrbExtractor, AdaptiveThresholdReachesLowContrastRegions) {
+  cv::Mat img = testImage();
+  ASSERT_FALSE(img.empty());
+  // Right half at 15 % contrast: its corners mostly score between 7 and 20.
+  cv::Mat half = img(cv::Rect(376, 0, 376, 480));
+  half.convertTo(half, CV_8U, 0.15, 128 * 0.85);
+  auto countRight = [&](const OrbParams& p) {
+    auto fs = OrbExtractor(p).extract(img);
+    EXPECT_TRUE(fs.ok());
+    int n = 0;
+    for (const auto& k : fs->keypoints) n += k.u > 400;
+    return n;
+  };
+  OrbParams adaptive;
+  OrbParams fixed;
+  fixed.fast_min_threshold = fixed.fast_threshold;
+  const int a = countRight(adaptive), f = countRight(fixed);
+  RecordProperty("right_adaptive", a);
+  RecordProperty("right_fixed", f);
+  EXPECT_GT(a, adaptive.num_features / 4);
+  EXPECT_LT(f, a / 2);
+}
