@@ -112,6 +112,41 @@ TEST(Tracker, RgbdOdometryOnRenderedRoom) {
   EXPECT_LT(st.max_rot_deg, 1.0);
 }
 
+TEST(Tracker, LostOnBlankFramesThenRelocalises) {
+  auto scene = test::roomCornerScene();
+  ASSERT_FALSE(scene.empty());
+  const PinholeIntrinsics K = rectifiedK();
+  Tracker tracker(TrackerParams(), K, 0.11);
+  const SE3 T_C0_W = groundTruth(0).inverse();
+  std::vector<TrackingStatus> status;
+  double err_after = 1e9;
+  for (int k = 0; k < 16; ++k) {
+    CameraFrame f;
+    f.stamp = k / 20.0;
+    const bool blank = k == 7 || k == 8;  // e.g. a covered lens
+    if (blank) {
+      f.left = cv::Mat(K.height, K.width, CV_8UC1, cv::Scalar(0));
+      f.depth = cv::Mat(K.height, K.width, CV_32F, cv::Scalar(0));
+    } else {
+      f.left = addNoise(test::renderPlanes(scene, K, groundTruth(k), &f.depth), k);
+    }
+    auto r = tracker.feed(f);
+    ASSERT_TRUE(r.ok()) << r.error();
+    status.push_back(r->status);
+    if (blank) {
+      EXPECT_FALSE(r->new_keyframe);
+    }
+    if (r->status == TrackingStatus::kOk)
+      err_after = (r->T_W_C.translation() - (T_C0_W * groundTruth(k)).translation()).norm();
+  }
+  EXPECT_EQ(status[6], TrackingStatus::kOk);
+  EXPECT_EQ(status[7], TrackingStatus::kLost);
+  EXPECT_EQ(status[8], TrackingStatus::kLost);
+  EXPECT_EQ(status[9], TrackingStatus::kOk) << "relocalisation against the local map";
+  EXPECT_EQ(status.back(), TrackingStatus::kOk);
+  EXPECT_LT(err_after, 0.01);
+}
+
 TEST(Tracker, MalformedFramesAreErrors) {
   Tracker tracker(TrackerParams(), rectifiedK(), 0.11);
   CameraFrame f;
