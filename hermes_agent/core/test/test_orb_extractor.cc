@@ -163,3 +163,31 @@ TEST(OrbExtractor, AdaptiveThresholdReachesLowContrastRegions) {
   EXPECT_GT(a, adaptive.num_features / 4);
   EXPECT_LT(f, a / 2);
 }
+
+TEST(OrbExtractor, UndistortKeypointsInvertsTheLens) {
+  PinholeRadtan cam;
+  cam.K.fx = 458.654;
+  cam.K.fy = 457.296;
+  cam.K.cx = 367.215;
+  cam.K.cy = 248.375;
+  cam.K.width = 752;
+  cam.K.height = 480;
+  cam.dist = {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05};  // EuRoC cam0
+  FeatureSet fs;
+  std::vector<Vec2> truth;
+  for (double u = 60; u < 700; u += 90)
+    for (double v = 40; v < 450; v += 70) {
+      truth.emplace_back(u, v);
+      Vec2 d;
+      ASSERT_TRUE(cam.project(Vec3((u - cam.K.cx) / cam.K.fx, (v - cam.K.cy) / cam.K.fy, 1.0), &d));
+      Keypoint k;
+      k.u = float(d.x());
+      k.v = float(d.y());
+      fs.keypoints.push_back(k);
+    }
+  undistortKeypoints(cam, cam.K, &fs);
+  for (size_t i = 0; i < truth.size(); ++i) {
+    EXPECT_NEAR(fs.keypoints[i].u, truth[i].x(), 1e-3);
+    EXPECT_NEAR(fs.keypoints[i].v, truth[i].y(), 1e-3);
+  }
+}

@@ -163,3 +163,31 @@ TEST(Tracker, MalformedFramesAreErrors) {
   ASSERT_TRUE(ok.ok()) << ok.error();
   EXPECT_EQ(ok->status, TrackingStatus::kNotInitialised);
 }
+
+TEST(Tracker, ParamsReadAllSections) {
+  auto c = Config::fromString(
+      "keyframe:\n  policy: covisibility\norb:\n  num_features: 800\n"
+      "stereo:\n  subpixel_fit: parabola\ntracker:\n  min_tracked: 40\n  typo: 1\n",
+      "tracker.yaml");
+  ASSERT_TRUE(c.ok());
+  TrackerParams p;
+  ASSERT_TRUE(p.read(*c).ok());
+  EXPECT_EQ(p.keyframe.policy, "covisibility");
+  EXPECT_EQ(p.orb.num_features, 800);
+  EXPECT_EQ(p.stereo.subpixel_fit, "parabola");
+  EXPECT_EQ(p.min_tracked, 40);
+  auto unused = c->unusedKeys();
+  ASSERT_EQ(unused.size(), 1u);
+  EXPECT_EQ(unused[0], "tracker.typo");
+  TrackerParams bad;
+  bad.min_tracked = 3;  // below pose.min_inliers
+  EXPECT_FALSE(bad.validate().ok());
+  ConfigWriter w;
+  p.write(&w);
+  auto back = Config::fromString(w.yaml(), "written");
+  ASSERT_TRUE(back.ok()) << w.yaml();
+  TrackerParams q;
+  ASSERT_TRUE(q.read(*back).ok());
+  EXPECT_EQ(q.keyframe.policy, "covisibility");
+  EXPECT_TRUE(back->unusedKeys().empty());
+}
