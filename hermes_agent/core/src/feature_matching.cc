@@ -80,6 +80,8 @@ std::vector<int> matchByProjection(const std::vector<LandmarkView>& landmarks,
                                    const SE3& T_C_W, const PinholeIntrinsics& K,
                                    const FeatureSet& frame, const KeypointGrid& grid,
                                    const ProjectionMatchParams& p) {
+  HERMES_CHECK(frame.descriptors.size() == frame.keypoints.size(),
+               "matchByProjection: one descriptor per keypoint");
   const int n = int(landmarks.size());
   std::vector<int> match(n, -1), dist(n, 0);
   std::vector<int> owner(frame.size(), -1);  // keypoint -> landmark
@@ -111,7 +113,7 @@ std::vector<int> matchByProjection(const std::vector<LandmarkView>& landmarks,
     dist[i] = best;
   }
 
-  if (p.check_orientation && !frame.angles.empty()) {
+  if (p.check_orientation && frame.angles.size() == frame.keypoints.size()) {
     // Histogram of angle changes; keep the dominant bin and its two neighbours.
     const int B = p.orientation_bins;
     std::vector<int> bin_of(n, -1), hist(B, 0);

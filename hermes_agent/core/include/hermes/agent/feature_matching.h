@@ -16,7 +16,8 @@
 
 namespace hermes {
 
-/// Buckets keypoints on a regular grid for radius queries.
+/// Buckets keypoints on a regular grid for radius queries. Keeps a pointer to
+/// `keypoints`, which must outlive the grid and not change.
 class KeypointGrid {
  public:
   KeypointGrid(const std::vector<Keypoint>& keypoints, int width, int height, int cell_px = 16);
