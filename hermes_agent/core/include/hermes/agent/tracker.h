@@ -1,0 +1,100 @@
+// Stereo / RGB-D visual odometry front end, one door in: feed(). The first frame
+// with enough depth initialises a local map of landmarks; every further frame is
+// tracked by constant-velocity prediction, projection matching against the
+// local map, robust motion-only pose optimisation (PnP RANSAC when the
+// prediction fails or after a loss: relocalisation against the local map), and
+// the keyframe policy decides when a new keyframe adds fresh depth landmarks.
+// Local mapping (triangulation across keyframes, fusion, local BA) is not here.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "hermes/agent/feature_matching.h"
+#include "hermes/agent/keyframe_policy.h"
+#include "hermes/agent/orb_extractor.h"
+#include "hermes/agent/pose_estimation.h"
+#include "hermes/agent/rgbd_depth.h"
+#include "hermes/agent/stereo_matcher.h"
+#include "hermes/core/config.h"
+#include "hermes/core/map_types.h"
+
+namespace hermes {
+
+/// One synchronised camera frame: a rectified stereo pair (left + right) or an
+/// RGB-D frame (left + depth in metres, CV_32F, registered to left).
+struct CameraFrame {
+  double stamp = 0;  ///< [s]
+  cv::Mat left;      ///< 8-bit grey, rectified
+  cv::Mat right;     ///< 8-bit grey, rectified; empty for RGB-D
+  cv::Mat depth;     ///< CV_32F metres; empty for stereo
+};
+
+struct TrackerParams {
+  OrbParams orb;
+  StereoParams stereo;
+  RgbdDepthParams rgbd;
+  ProjectionMatchParams matching;
+  PoseEstimationParams pose;
+  KeyframePolicyParams keyframe;
+  int init_min_points = 60;       ///< depth keypoints needed to initialise
+  int min_tracked = 25;           ///< inliers for tracking to count as OK
+  int local_map_keyframes = 6;    ///< landmarks of the last N keyframes form the local map
+  double relocalise_radius_px = 40;  ///< search radius when lost
+
+  /// Reads sections orb, stereo, rgbd, matching, pose, keyframe and tracker.
+  Status read(const Config& config);
+  void write(ConfigWriter* writer) const;
+  Status validate() const;
+};
+
+enum class TrackingStatus { kNotInitialised, kOk, kLost };
+const char* toString(TrackingStatus s);
+
+struct TrackResult {
+  TrackingStatus status = TrackingStatus::kNotInitialised;
+  SE3 T_W_C;                 ///< camera pose in the odometry frame (valid when kOk)
+  int matched = 0;           ///< landmarks matched before optimisation
+  int tracked = 0;           ///< inliers after optimisation
+  bool new_keyframe = false;
+  KeyframeDecision keyframe;
+};
+
+class Tracker {
+ public:
+  Tracker(const TrackerParams& params, const PinholeIntrinsics& K, double baseline);
+
+  /// Processes one frame. Errors: malformed frame (empty, wrong type or size).
+  Expected<TrackResult> feed(const CameraFrame& frame);
+
+  const std::vector<Keyframe>& keyframes() const { return keyframes_; }
+  const std::vector<Landmark>& landmarks() const { return landmarks_; }
+  TrackingStatus status() const { return status_; }
+
+ private:
+  Status computeFeatures(const CameraFrame& frame, FeatureSet* features) const;
+  bool initialise(const CameraFrame& frame, FeatureSet& features, TrackResult* result);
+  void insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& features,
+                      const std::vector<int>& keypoint_landmark);
+  std::vector<std::size_t> localMap() const;
+
+  TrackerParams params_;
+  PinholeIntrinsics K_;
+  double baseline_;
+  OrbExtractor extractor_;
+  KeyframePolicy policy_;
+  TrackingStatus status_ = TrackingStatus::kNotInitialised;
+  std::vector<Keyframe> keyframes_;
+  std::vector<Landmark> landmarks_;
+  std::vector<float> landmark_angle_;       ///< per landmark, last keypoint angle [deg]
+  std::vector<KeyframeId> landmark_origin_; ///< keyframe that created it
+  SE3 T_C_W_last_, T_C_W_prev_;             ///< last two tracked poses
+  bool have_velocity_ = false;
+  int reference_tracked_ = 0;
+};
+
+}  // namespace hermes

@@ -1,0 +1,243 @@
+#include "hermes/agent/tracker.h"
+
+#include <algorithm>
+#include <set>
+
+#include <opencv2/imgproc.hpp>
+
+namespace hermes {
+
+const char* toString(TrackingStatus s) {
+  switch (s) {
+    case TrackingStatus::kNotInitialised: return "not_initialised";
+    case TrackingStatus::kOk: return "ok";
+    case TrackingStatus::kLost: return "lost";
+  }
+  return "?";
+}
+
+Status TrackerParams::read(const Config& c) {
+  for (Status s : {orb.read(c, "orb"), stereo.read(c, "stereo"), rgbd.read(c, "rgbd"),
+                   matching.read(c, "matching"), pose.read(c, "pose"),
+                   keyframe.read(c, "keyframe")})
+    if (!s) return s;
+  for (auto [key, ptr] : {std::pair<const char*, int*>{"init_min_points", &init_min_points},
+                          {"min_tracked", &min_tracked},
+                          {"local_map_keyframes", &local_map_keyframes}}) {
+    Status s = c.get(std::string("tracker.") + key, ptr);
+    if (!s) return s;
+  }
+  Status s = c.get("tracker.relocalise_radius_px", &relocalise_radius_px);
+  if (!s) return s;
+  return validate();
+}
+
+void TrackerParams::write(ConfigWriter* w) const {
+  orb.write(w, "orb");
+  stereo.write(w, "stereo");
+  rgbd.write(w, "rgbd");
+  matching.write(w, "matching");
+  pose.write(w, "pose");
+  keyframe.write(w, "keyframe");
+  w->set("tracker.init_min_points", init_min_points);
+  w->set("tracker.min_tracked", min_tracked);
+  w->set("tracker.local_map_keyframes", local_map_keyframes);
+  w->set("tracker.relocalise_radius_px", relocalise_radius_px);
+}
+
+Status TrackerParams::validate() const {
+  for (Status s : {orb.validate(), stereo.validate(), rgbd.validate(), matching.validate(),
+                   pose.validate(), keyframe.validate()})
+    if (!s) return s;
+  if (init_min_points < 4) return Error{"tracker.init_min_points must be >= 4"};
+  if (min_tracked < pose.min_inliers)
+    return Error{"tracker.min_tracked must be >= pose.min_inliers"};
+  if (local_map_keyframes < 1) return Error{"tracker.local_map_keyframes must be >= 1"};
+  if (!(relocalise_radius_px > 0)) return Error{"tracker.relocalise_radius_px must be > 0"};
+  return Status::Ok();
+}
+
+Tracker::Tracker(const TrackerParams& params, const PinholeIntrinsics& K, double baseline)
+    : params_(params), K_(K), baseline_(baseline), extractor_(params.orb),
+      policy_(params.keyframe) {
+  Status s = params_.validate();
+  HERMES_CHECK(s.ok(), s.error());
+  HERMES_CHECK(K.fx > 0 && K.fy > 0 && K.width > 0 && K.height > 0, "tracker: bad intrinsics");
+}
+
+Status Tracker::computeFeatures(const CameraFrame& f, FeatureSet* out) const {
+  const cv::Size size(K_.width, K_.height);
+  if (f.left.empty() || f.left.type() != CV_8UC1 || f.left.size() != size)
+    return Error{"tracker: frame at t=" + std::to_string(f.stamp) +
+                 ": left image must be 8-bit grey " + std::to_string(K_.width) + "x" +
+                 std::to_string(K_.height)};
+  const bool stereo = !f.right.empty(), rgbd = !f.depth.empty();
+  if (stereo == rgbd)
+    return Error{"tracker: frame at t=" + std::to_string(f.stamp) +
+                 " needs exactly one of a right image or a depth image"};
+  auto left = extractor_.extract(f.left);
+  if (!left.ok()) return Error{left.error()};
+  *out = std::move(left.value());
+  if (stereo) {
+    if (f.right.type() != CV_8UC1 || f.right.size() != size)
+      return Error{"tracker: frame at t=" + std::to_string(f.stamp) +
+                   ": right image must match the left one"};
+    if (!(baseline_ > 0)) return Error{"tracker: stereo frame but baseline <= 0"};
+    auto right = extractor_.extract(f.right);
+    if (!right.ok()) return Error{right.error()};
+    auto st = matchStereo(out, *right, K_, baseline_, params_.stereo);
+    if (!st.ok()) return Error{st.error()};
+  } else {
+    auto n = assignDepthFromImage(f.depth, params_.rgbd, out);
+    if (!n.ok()) return Error{n.error()};
+  }
+  return Status::Ok();
+}
+
+void Tracker::insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& fs,
+                             const std::vector<int>& keypoint_landmark) {
+  Keyframe kf;
+  kf.id = keyframes_.size();
+  kf.stamp = stamp;
+  kf.T_A_C = T_W_C;
+  kf.keypoints = fs.keypoints;
+  kf.descriptors = fs.descriptors;
+  kf.keypoint_landmark.assign(fs.size(), kInvalidId);
+  int associated = 0;
+  for (std::size_t i = 0; i < fs.size(); ++i) {
+    const Keypoint& k = fs.keypoints[i];
+    LandmarkId id = kInvalidId;
+    if (keypoint_landmark[i] >= 0) {
+      id = LandmarkId(keypoint_landmark[i]);
+    } else if (k.depth > 0) {
+      Landmark l;
+      l.id = landmarks_.size();
+      const Vec3 p_C((k.u - K_.cx) / K_.fx * k.depth, (k.v - K_.cy) / K_.fy * k.depth, k.depth);
+      l.p_A = T_W_C * p_C;
+      l.descriptor = fs.descriptors[i];
+      landmarks_.push_back(l);
+      landmark_angle_.push_back(fs.angles[i]);
+      landmark_origin_.push_back(kf.id);
+      id = l.id;
+    }
+    if (id == kInvalidId) continue;
+    landmarks_[id].observations.push_back({kf.id, std::uint32_t(i)});
+    kf.keypoint_landmark[i] = id;
+    ++associated;
+  }
+  (void)associated;
+  reference_tracked_ = 0;  // set by the next tracked frame
+  keyframes_.push_back(std::move(kf));
+}
+
+std::vector<std::size_t> Tracker::localMap() const {
+  std::set<std::size_t> ids;
+  const std::size_t first =
+      keyframes_.size() > std::size_t(params_.local_map_keyframes)
+          ? keyframes_.size() - params_.local_map_keyframes
+          : 0;
+  for (std::size_t k = first; k < keyframes_.size(); ++k)
+    for (LandmarkId id : keyframes_[k].keypoint_landmark)
+      if (id != kInvalidId) ids.insert(id);
+  return {ids.begin(), ids.end()};
+}
+
+bool Tracker::initialise(const CameraFrame& frame, FeatureSet& fs, TrackResult* r) {
+  int with_depth = 0;
+  for (const auto& k : fs.keypoints) with_depth += k.depth > 0;
+  if (with_depth < params_.init_min_points) return false;
+  insertKeyframe(frame.stamp, SE3(), fs, std::vector<int>(fs.size(), -1));
+  status_ = TrackingStatus::kOk;
+  T_C_W_last_ = SE3();
+  have_velocity_ = false;
+  policy_.reset();
+  r->status = status_;
+  r->new_keyframe = true;
+  r->tracked = with_depth;
+  return true;
+}
+
+Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
+  FeatureSet fs;
+  Status s = computeFeatures(frame, &fs);
+  if (!s) return Error{s.error()};
+  TrackResult r;
+  if (status_ == TrackingStatus::kNotInitialised) {
+    initialise(frame, fs, &r);
+    return r;
+  }
+
+  const bool was_ok = status_ == TrackingStatus::kOk;
+  const SE3 T_C_W_pred = was_ok && have_velocity_
+                             ? (T_C_W_last_ * T_C_W_prev_.inverse()) * T_C_W_last_
+                             : T_C_W_last_;
+  const auto local = localMap();
+  std::vector<LandmarkView> views(local.size());
+  for (std::size_t i = 0; i < local.size(); ++i) {
+    views[i].p_W = landmarks_[local[i]].p_A;
+    views[i].descriptor = landmarks_[local[i]].descriptor;
+    views[i].angle = landmark_angle_[local[i]];
+  }
+  KeypointGrid grid(fs.keypoints, K_.width, K_.height);
+  ProjectionMatchParams mp = params_.matching;
+  if (!was_ok) mp.radius_px = params_.relocalise_radius_px;
+  auto match = matchByProjection(views, T_C_W_pred, K_, fs, grid, mp);
+  auto count = [](const std::vector<int>& m) {
+    return int(std::count_if(m.begin(), m.end(), [](int j) { return j >= 0; }));
+  };
+  if (count(match) < params_.min_tracked && was_ok) {  // fast motion: widen the search
+    mp.radius_px *= 2;
+    match = matchByProjection(views, T_C_W_pred, K_, fs, grid, mp);
+  }
+  r.matched = count(match);
+
+  Correspondences c;
+  std::vector<int> corr_landmark, corr_keypoint;
+  for (std::size_t i = 0; i < match.size(); ++i) {
+    if (match[i] < 0) continue;
+    const Keypoint& k = fs.keypoints[match[i]];
+    c.p_W.push_back(views[i].p_W);
+    c.uv.push_back(Vec2(k.u, k.v));
+    c.sigma_px.push_back(fs.scales[k.octave]);
+    corr_landmark.push_back(int(local[i]));
+    corr_keypoint.push_back(match[i]);
+  }
+  Expected<PoseEstimate> est = Error{"no pose"};
+  if (int(c.size()) >= params_.pose.min_inliers) {
+    if (was_ok) est = refinePose(c, K_, T_C_W_pred, params_.pose);
+    if (!est.ok() || est->num_inliers < params_.min_tracked) est = estimatePose(c, K_, params_.pose);
+  }
+  if (!est.ok() || est->num_inliers < params_.min_tracked) {
+    status_ = TrackingStatus::kLost;
+    have_velocity_ = false;
+    r.status = status_;
+    r.tracked = est.ok() ? est->num_inliers : 0;
+    r.keyframe = policy_.decide(frame.left, TrackingState{false, r.tracked, reference_tracked_});
+    return r;
+  }
+
+  status_ = TrackingStatus::kOk;
+  have_velocity_ = was_ok;
+  T_C_W_prev_ = T_C_W_last_;
+  T_C_W_last_ = est->T_C_W;
+  r.status = status_;
+  r.T_W_C = est->T_C_W.inverse();
+  r.tracked = est->num_inliers;
+  std::vector<int> keypoint_landmark(fs.size(), -1);
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    if (!est->inlier[i]) continue;
+    keypoint_landmark[corr_keypoint[i]] = corr_landmark[i];
+    landmark_angle_[corr_landmark[i]] = fs.angles[corr_keypoint[i]];
+  }
+  // The reference count is that of the first frame tracked after the last
+  // keyframe (a new keyframe's own landmark count includes points never tracked).
+  if (reference_tracked_ == 0) reference_tracked_ = r.tracked;
+  r.keyframe = policy_.decide(frame.left, TrackingState{true, r.tracked, reference_tracked_});
+  if (r.keyframe.insert) {
+    insertKeyframe(frame.stamp, r.T_W_C, fs, keypoint_landmark);
+    r.new_keyframe = true;
+  }
+  return r;
+}
+
+}  // namespace hermes

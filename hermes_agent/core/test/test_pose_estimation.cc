@@ -1,0 +1,147 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "hermes/agent/pose_estimation.h"
+
+using namespace hermes;
+
+namespace {
+
+PinholeIntrinsics euroc() {
+  PinholeIntrinsics K;
+  K.fx = 458.654;
+  K.fy = 457.296;
+  K.cx = 367.215;
+  K.cy = 248.375;
+  K.width = 752;
+  K.height = 480;
+  return K;
+}
+
+SE3 randomPose(std::mt19937& rng, double max_angle, double max_t) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  Vec3 axis(u(rng), u(rng), u(rng));
+  return SE3(expSO3(axis.normalized() * max_angle * std::abs(u(rng))),
+             Vec3(u(rng), u(rng), u(rng)) * max_t);
+}
+
+/// Points seen by a camera at T_C_W, their noisy projections, and a fraction of
+/// correspondences replaced by random pixels (outliers).
+Correspondences makeScene(std::mt19937& rng, const SE3& T_C_W, const PinholeIntrinsics& K,
+                          int n, double noise_px, double outlier_fraction,
+                          std::vector<bool>* is_outlier) {
+  std::uniform_real_distribution<double> ux(0, K.width), uy(0, K.height), uz(1.5, 8.0),
+      u01(0, 1);
+  std::normal_distribution<double> noise(0, noise_px);
+  Correspondences c;
+  const SE3 T_W_C = T_C_W.inverse();
+  for (int i = 0; i < n; ++i) {
+    const Vec2 uv(ux(rng), uy(rng));
+    const double z = uz(rng);
+    const Vec3 p_C((uv.x() - K.cx) / K.fx * z, (uv.y() - K.cy) / K.fy * z, z);
+    c.p_W.push_back(T_W_C * p_C);
+    const bool out = u01(rng) < outlier_fraction;
+    is_outlier->push_back(out);
+    c.uv.push_back(out ? Vec2(ux(rng), uy(rng)) : uv + Vec2(noise(rng), noise(rng)));
+  }
+  return c;
+}
+
+}  // namespace
+
+TEST(PoseEstimation, AutodiffJacobianMatchesCentralDifferences) {
+  std::mt19937 rng(3);
+  const PinholeIntrinsics K = euroc();
+  for (int trial = 0; trial < 20; ++trial) {
+    const SE3 T = randomPose(rng, 0.5, 0.3);
+    const Vec3 p_W = T.inverse() * Vec3(0.3 * trial / 20.0 - 0.1, -0.2, 2.0 + 0.1 * trial);
+    const Vec2 uv(300, 200);
+    std::unique_ptr<ceres::CostFunction> cost(ReprojectionResidual::create(uv, p_W, K, 1.3));
+    double q[4] = {T.quat().x(), T.quat().y(), T.quat().z(), T.quat().w()};
+    double t[3] = {T.translation().x(), T.translation().y(), T.translation().z()};
+    double* params[2] = {q, t};
+    double r[2], Jq[8], Jt[6];
+    double* jac[2] = {Jq, Jt};
+    ASSERT_TRUE(cost->Evaluate(params, r, jac));
+    const double h = 1e-6;
+    ReprojectionResidual f(uv, p_W, K, 1.3);
+    for (int block = 0; block < 2; ++block) {
+      const int dim = block == 0 ? 4 : 3;
+      double* x = block == 0 ? q : t;
+      for (int k = 0; k < dim; ++k) {
+        const double x0 = x[k];
+        double rp[2], rm[2];
+        x[k] = x0 + h;
+        f(q, t, rp);
+        x[k] = x0 - h;
+        f(q, t, rm);
+        x[k] = x0;
+        for (int row = 0; row < 2; ++row) {
+          const double numeric = (rp[row] - rm[row]) / (2 * h);
+          const double analytic = jac[block][row * dim + k];
+          EXPECT_NEAR(analytic, numeric, 1e-5 * std::max(1.0, std::abs(numeric)))
+              << "block " << block << " param " << k << " row " << row;
+        }
+      }
+    }
+  }
+}
+
+TEST(PoseEstimation, PnpRansacAndRefinementWithOutliers) {
+  std::mt19937 rng(7);
+  const PinholeIntrinsics K = euroc();
+  double worst_t = 0, worst_r = 0;
+  for (int trial = 0; trial < 5; ++trial) {
+    const SE3 T_C_W = randomPose(rng, 0.6, 1.0);
+    std::vector<bool> is_out;
+    Correspondences c = makeScene(rng, T_C_W, K, 300, 0.8, 0.3, &is_out);
+    auto est = estimatePose(c, K, PoseEstimationParams());
+    ASSERT_TRUE(est.ok()) << est.error();
+    worst_t = std::max(worst_t, translationalDistance(est->T_C_W, T_C_W));
+    worst_r = std::max(worst_r, angularDistance(est->T_C_W, T_C_W) * 180 / M_PI);
+    int wrong = 0;
+    for (size_t i = 0; i < c.size(); ++i) wrong += est->inlier[i] && is_out[i];
+    EXPECT_LE(wrong, 3);  // a random pixel may land within the gate by chance
+    EXPECT_LT(est->rms_px, 1.5);
+  }
+  std::printf("PnP+refinement worst error over 5 trials: %.4f m, %.4f deg\n", worst_t, worst_r);
+  EXPECT_LT(worst_t, 0.01);
+  EXPECT_LT(worst_r, 0.1);
+}
+
+TEST(PoseEstimation, RefinementFromPredictionRejectsOutliers) {
+  std::mt19937 rng(11);
+  const PinholeIntrinsics K = euroc();
+  const SE3 T_C_W = randomPose(rng, 0.4, 0.5);
+  std::vector<bool> is_out;
+  Correspondences c = makeScene(rng, T_C_W, K, 200, 0.5, 0.3, &is_out);
+  // Constant-velocity-like prediction: 2 cm and 1 deg off.
+  const SE3 pred = SE3::exp((Vec6() << 0.02, -0.01, 0.01, 0.01, 0.012, -0.008).finished()) * T_C_W;
+  auto est = refinePose(c, K, pred, PoseEstimationParams());
+  ASSERT_TRUE(est.ok()) << est.error();
+  EXPECT_LT(translationalDistance(est->T_C_W, T_C_W), 0.01);
+  EXPECT_LT(angularDistance(est->T_C_W, T_C_W) * 180 / M_PI, 0.1);
+  int missed = 0;
+  for (size_t i = 0; i < c.size(); ++i) missed += !est->inlier[i] && !is_out[i];
+  EXPECT_LT(missed, 5);
+}
+
+TEST(PoseEstimation, BadInputIsAnError) {
+  const PinholeIntrinsics K = euroc();
+  Correspondences c;
+  EXPECT_FALSE(estimatePose(c, K, PoseEstimationParams()).ok());
+  std::mt19937 rng(1);
+  std::vector<bool> is_out;
+  c = makeScene(rng, SE3(), K, 50, 0.5, 0.0, &is_out);
+  c.uv.pop_back();
+  EXPECT_FALSE(estimatePose(c, K, PoseEstimationParams()).ok());
+  c.uv.push_back(Vec2(std::nan(""), 1));
+  auto e = refinePose(c, K, SE3(), PoseEstimationParams());
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.error().find("49"), std::string::npos);
+  // All outliers: RANSAC cannot find a consensus.
+  c = makeScene(rng, SE3(), K, 60, 0.5, 1.0, &is_out);
+  EXPECT_FALSE(estimatePose(c, K, PoseEstimationParams()).ok());
+}

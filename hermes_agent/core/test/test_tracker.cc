@@ -1,0 +1,193 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "frontend_synthetic.h"
+#include "hermes/agent/tracker.h"
+#include "plane_scene.h"
+
+using namespace hermes;
+
+namespace {
+
+PinholeIntrinsics rectifiedK() {
+  PinholeIntrinsics K;
+  K.fx = K.fy = 436.0;
+  K.cx = 375.5;
+  K.cy = 239.5;
+  K.width = 752;
+  K.height = 480;
+  return K;
+}
+
+/// Ground-truth camera motion: forward drift with a sideways sway and small
+/// yaw / pitch oscillations, sampled at 20 Hz.
+SE3 groundTruth(int k) {
+  const double t = k / 20.0;
+  const Vec3 p(0.4 * std::sin(0.8 * t), 0.05 * std::sin(1.3 * t), 0.25 * t);
+  const Vec3 w(0.03 * std::sin(1.0 * t), 0.1 * std::sin(0.6 * t), 0.0);
+  return SE3(expSO3(w), p);
+}
+
+cv::Mat addNoise(const cv::Mat& img, int seed) {
+  cv::Mat n(img.size(), CV_16S);
+  cv::RNG rng(seed);
+  rng.fill(n, cv::RNG::NORMAL, 0, 2.0);
+  cv::Mat out;
+  cv::add(img, n, out, cv::noArray(), CV_8U);
+  return out;
+}
+
+struct RunStats {
+  int frames = 0, lost = 0, keyframes = 0;
+  double rmse = 0, final_err = 0, max_rot_deg = 0, path = 0;
+};
+
+RunStats runSequence(bool stereo, int frames) {
+  RunStats st;
+  auto scene = test::roomCornerScene();
+  if (scene.empty()) return st;
+  const PinholeIntrinsics K = rectifiedK();
+  const double b = 0.11;
+  const SE3 T_C_R(Quat::Identity(), Vec3(b, 0, 0));  // right camera b along x
+  Tracker tracker(TrackerParams(), K, b);
+  const SE3 T_C0_W = groundTruth(0).inverse();
+  double sq = 0;
+  Vec3 prev = Vec3::Zero();
+  for (int k = 0; k < frames; ++k) {
+    const SE3 T_W_C = groundTruth(k);
+    CameraFrame f;
+    f.stamp = k / 20.0;
+    cv::Mat depth;
+    f.left = addNoise(test::renderPlanes(scene, K, T_W_C, &depth), 2 * k);
+    if (stereo)
+      f.right = addNoise(test::renderPlanes(scene, K, T_W_C * T_C_R), 2 * k + 1);
+    else
+      f.depth = depth;
+    auto r = tracker.feed(f);
+    EXPECT_TRUE(r.ok()) << r.error();
+    if (!r.ok()) return st;
+    ++st.frames;
+    if (r->status != TrackingStatus::kOk) {
+      ++st.lost;
+      continue;
+    }
+    const SE3 gt = T_C0_W * T_W_C;  // odometry frame = first camera
+    const double e = (r->T_W_C.translation() - gt.translation()).norm();
+    sq += e * e;
+    st.final_err = e;
+    st.max_rot_deg = std::max(st.max_rot_deg, angularDistance(r->T_W_C, gt) * 180 / M_PI);
+    st.path += (gt.translation() - prev).norm();
+    prev = gt.translation();
+  }
+  st.rmse = std::sqrt(sq / std::max(1, st.frames - st.lost));
+  st.keyframes = int(tracker.keyframes().size());
+  return st;
+}
+
+}  // namespace
+
+TEST(Tracker, StereoOdometryOnRenderedRoom) {
+  RunStats st = runSequence(true, 40);
+  ASSERT_GT(st.frames, 0) << "opencv-doc photos missing";
+  std::printf("stereo VO: %d frames, %d lost, %d keyframes, path %.3f m, ATE RMSE %.4f m, "
+              "final %.4f m, max rot err %.3f deg\n",
+              st.frames, st.lost, st.keyframes, st.path, st.rmse, st.final_err, st.max_rot_deg);
+  EXPECT_EQ(st.lost, 0);
+  EXPECT_GT(st.keyframes, 1);
+  EXPECT_LT(st.keyframes, st.frames / 2);  // not every frame
+  EXPECT_LT(st.rmse, 0.02);
+  EXPECT_LT(st.final_err, 0.03 * st.path + 0.01);
+  EXPECT_LT(st.max_rot_deg, 1.0);
+}
+
+TEST(Tracker, RgbdOdometryOnRenderedRoom) {
+  RunStats st = runSequence(false, 25);
+  ASSERT_GT(st.frames, 0);
+  std::printf("RGB-D VO: %d frames, %d lost, %d keyframes, path %.3f m, ATE RMSE %.4f m, "
+              "final %.4f m, max rot err %.3f deg\n",
+              st.frames, st.lost, st.keyframes, st.path, st.rmse, st.final_err, st.max_rot_deg);
+  EXPECT_EQ(st.lost, 0);
+  EXPECT_LT(st.rmse, 0.02);
+  EXPECT_LT(st.max_rot_deg, 1.0);
+}
+
+TEST(Tracker, LostOnBlankFramesThenRelocalises) {
+  auto scene = test::roomCornerScene();
+  ASSERT_FALSE(scene.empty());
+  const PinholeIntrinsics K = rectifiedK();
+  Tracker tracker(TrackerParams(), K, 0.11);
+  const SE3 T_C0_W = groundTruth(0).inverse();
+  std::vector<TrackingStatus> status;
+  double err_after = 1e9;
+  for (int k = 0; k < 16; ++k) {
+    CameraFrame f;
+    f.stamp = k / 20.0;
+    const bool blank = k == 7 || k == 8;  // e.g. a covered lens
+    if (blank) {
+      f.left = cv::Mat(K.height, K.width, CV_8UC1, cv::Scalar(0));
+      f.depth = cv::Mat(K.height, K.width, CV_32F, cv::Scalar(0));
+    } else {
+      f.left = addNoise(test::renderPlanes(scene, K, groundTruth(k), &f.depth), k);
+    }
+    auto r = tracker.feed(f);
+    ASSERT_TRUE(r.ok()) << r.error();
+    status.push_back(r->status);
+    if (blank) {
+      EXPECT_FALSE(r->new_keyframe);
+    }
+    if (r->status == TrackingStatus::kOk)
+      err_after = (r->T_W_C.translation() - (T_C0_W * groundTruth(k)).translation()).norm();
+  }
+  EXPECT_EQ(status[6], TrackingStatus::kOk);
+  EXPECT_EQ(status[7], TrackingStatus::kLost);
+  EXPECT_EQ(status[8], TrackingStatus::kLost);
+  EXPECT_EQ(status[9], TrackingStatus::kOk) << "relocalisation against the local map";
+  EXPECT_EQ(status.back(), TrackingStatus::kOk);
+  EXPECT_LT(err_after, 0.01);
+}
+
+TEST(Tracker, MalformedFramesAreErrors) {
+  Tracker tracker(TrackerParams(), rectifiedK(), 0.11);
+  CameraFrame f;
+  EXPECT_FALSE(tracker.feed(f).ok());
+  f.left = cv::Mat(480, 752, CV_8UC1, cv::Scalar(0));
+  EXPECT_FALSE(tracker.feed(f).ok());  // neither right nor depth
+  f.right = cv::Mat(240, 376, CV_8UC1, cv::Scalar(0));
+  auto r = tracker.feed(f);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().find("right"), std::string::npos);
+  // A featureless frame is not an error: the tracker just stays uninitialised.
+  f.right = f.left.clone();
+  auto ok = tracker.feed(f);
+  ASSERT_TRUE(ok.ok()) << ok.error();
+  EXPECT_EQ(ok->status, TrackingStatus::kNotInitialised);
+}
+
+TEST(Tracker, ParamsReadAllSections) {
+  auto c = Config::fromString(
+      "keyframe:\n  policy: covisibility\norb:\n  num_features: 800\n"
+      "stereo:\n  subpixel_fit: parabola\ntracker:\n  min_tracked: 40\n  typo: 1\n",
+      "tracker.yaml");
+  ASSERT_TRUE(c.ok());
+  TrackerParams p;
+  ASSERT_TRUE(p.read(*c).ok());
+  EXPECT_EQ(p.keyframe.policy, "covisibility");
+  EXPECT_EQ(p.orb.num_features, 800);
+  EXPECT_EQ(p.stereo.subpixel_fit, "parabola");
+  EXPECT_EQ(p.min_tracked, 40);
+  auto unused = c->unusedKeys();
+  ASSERT_EQ(unused.size(), 1u);
+  EXPECT_EQ(unused[0], "tracker.typo");
+  TrackerParams bad;
+  bad.min_tracked = 3;  // below pose.min_inliers
+  EXPECT_FALSE(bad.validate().ok());
+  ConfigWriter w;
+  p.write(&w);
+  auto back = Config::fromString(w.yaml(), "written");
+  ASSERT_TRUE(back.ok()) << w.yaml();
+  TrackerParams q;
+  ASSERT_TRUE(q.read(*back).ok());
+  EXPECT_EQ(q.keyframe.policy, "covisibility");
+  EXPECT_TRUE(back->unusedKeys().empty());
+}
