@@ -47,11 +47,15 @@ std::vector<int> prefilterPairs(const GeneralizedCorrespondences& corr,
     groups[{corr.cam_q[i], corr.cam_c[i]}].push_back(static_cast<int>(i));
   }
   opengv::relative_pose::CentralRelativeAdapter adapter(b1, b2);
+  CentralProblem::algorithm_t algorithm = CentralProblem::NISTER;
+  if (params.prefilter_solver == "stewenius") algorithm = CentralProblem::STEWENIUS;
+  if (params.prefilter_solver == "sevenpt") algorithm = CentralProblem::SEVENPT;
+  if (params.prefilter_solver == "eightpt") algorithm = CentralProblem::EIGHTPT;
   std::vector<int> kept;
   for (const auto& [pair, idx] : groups) {
     if (static_cast<int>(idx.size()) < params.prefilter_min_matches) continue;
     opengv::sac::Ransac<CentralProblem> ransac;
-    ransac.sac_model_ = std::make_shared<CentralProblem>(adapter, CentralProblem::NISTER, idx,
+    ransac.sac_model_ = std::make_shared<CentralProblem>(adapter, algorithm, idx,
                                                          !params.deterministic);
     ransac.threshold_ = threshold;
     ransac.max_iterations_ = params.prefilter_max_iterations;

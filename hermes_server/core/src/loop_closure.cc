@@ -14,6 +14,8 @@ Status LoopClosureParams::read(const Config& config, const std::string& prefix) 
                    config.get(p + "prefilter_pairs", &prefilter_pairs),
                    config.get(p + "prefilter_min_matches", &prefilter_min_matches),
                    config.get(p + "prefilter_max_iterations", &prefilter_max_iterations),
+                   config.getChoice(p + "prefilter_solver", {"nister", "stewenius", "sevenpt", "eightpt"},
+                                    &prefilter_solver),
                    config.get(p + "min_matches", &min_matches),
                    config.get(p + "min_inliers", &min_inliers),
                    config.get(p + "min_inlier_ratio", &min_inlier_ratio),
@@ -37,6 +39,7 @@ void LoopClosureParams::write(ConfigWriter* w, const std::string& prefix) const 
   w->set(p + "prefilter_pairs", prefilter_pairs);
   w->set(p + "prefilter_min_matches", prefilter_min_matches);
   w->set(p + "prefilter_max_iterations", prefilter_max_iterations);
+  w->set(p + "prefilter_solver", prefilter_solver);
   w->set(p + "min_matches", min_matches);
   w->set(p + "min_inliers", min_inliers);
   w->set(p + "min_inlier_ratio", min_inlier_ratio);
@@ -52,8 +55,12 @@ Status LoopClosureParams::validate() const {
   if (!(ransac_threshold_px > 0)) return Error{"ransac_threshold_px must be > 0"};
   if (ransac_max_iterations < 1) return Error{"ransac_max_iterations must be >= 1"};
   if (!(ransac_probability > 0 && ransac_probability < 1)) return Error{"ransac_probability must be in (0, 1)"};
-  if (prefilter_min_matches < 5) return Error{"prefilter_min_matches must be >= 5 (5-point solver)"};
+  if (prefilter_min_matches < 8) return Error{"prefilter_min_matches must be >= 8 (minimal samples up to 8)"};
   if (prefilter_max_iterations < 1) return Error{"prefilter_max_iterations must be >= 1"};
+  if (prefilter_solver != "nister" && prefilter_solver != "stewenius" &&
+      prefilter_solver != "sevenpt" && prefilter_solver != "eightpt") {
+    return Error{"prefilter_solver must be nister, stewenius, sevenpt or eightpt"};
+  }
   if (min_matches < 18) return Error{"min_matches must be >= 18 (17-point solver)"};
   if (min_inliers < 18) return Error{"min_inliers must be >= 18 (17-point solver)"};
   if (!(min_inlier_ratio >= 0 && min_inlier_ratio <= 1)) return Error{"min_inlier_ratio must be in [0, 1]"};

@@ -33,6 +33,7 @@ struct LoopClosureParams {
   bool prefilter_pairs = true;        ///< central 5-point RANSAC per camera pair before the 17-point
   int prefilter_min_matches = 10;     ///< camera pairs with fewer matches are dropped by the pre-filter
   int prefilter_max_iterations = 300; ///< per camera pair
+  std::string prefilter_solver = "nister";  ///< nister | stewenius | sevenpt | eightpt (OpenGV central)
   int min_matches = 30;               ///< fewer putative correspondences: fail without RANSAC
   int min_inliers = 25;               ///< final inliers required
   double min_inlier_ratio = 0.15;     ///< final inliers / putative correspondences
