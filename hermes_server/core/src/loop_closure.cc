@@ -1,6 +1,7 @@
 #include "hermes/server/loop_closure.h"
 
 #include <chrono>
+#include <cmath>
 
 namespace hermes {
 namespace server {
@@ -111,7 +112,16 @@ LoopCloser::LoopCloser(const LoopClosureParams& params) : params_(params) {}
 
 LoopClosureResult LoopCloser::close(const Rig& query, const Rig& candidate) const {
   const auto t0 = std::chrono::steady_clock::now();
-  const std::vector<RigMatch> matches = matchRigs(query, candidate, params_.matching);
+  // Keypoints with non-finite coordinates (corrupt data) are dropped here so that
+  // one bad keypoint does not invalidate the whole attempt.
+  std::vector<RigMatch> matches;
+  for (const RigMatch& m : matchRigs(query, candidate, params_.matching)) {
+    const Keypoint& kq = query.keyframes[m.cam_q]->keypoints[m.kp_q];
+    const Keypoint& kc = candidate.keyframes[m.cam_c]->keypoints[m.kp_c];
+    if (std::isfinite(kq.u) && std::isfinite(kq.v) && std::isfinite(kc.u) && std::isfinite(kc.v)) {
+      matches.push_back(m);
+    }
+  }
   LoopClosureResult res =
       solveGeneralizedRelativePose(makeCorrespondences(query, candidate, matches), params_);
   for (int i : res.inliers) res.inlier_matches.push_back(matches[i]);

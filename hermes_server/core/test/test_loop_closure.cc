@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <limits>
 #include <random>
 
 #include "hermes/server/loop_closure.h"
@@ -288,6 +289,12 @@ TEST(LoopClosure, FullPathFromKeyframes) {
               r.num_matches, r.num_prefiltered, r.num_inliers,
               translationalDistance(r.T_refQ_refC, s.T_refQ_refC),
               angularDistance(r.T_refQ_refC, s.T_refQ_refC) / kDeg, ms);
+
+  // A corrupt (NaN) keypoint is dropped, the loop still closes.
+  auto corrupt = c;
+  corrupt[0].keypoints[0].u = std::numeric_limits<float>::quiet_NaN();
+  const LoopClosureResult rn = closer.close(q[0], neighbours(q), cams, corrupt[0], neighbours(corrupt), cams);
+  EXPECT_TRUE(rn.ok()) << rn.reason;
 
   // Unrelated candidate (fresh descriptors): must fail cleanly.
   std::vector<Descriptor> other;
