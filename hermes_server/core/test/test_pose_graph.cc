@@ -222,6 +222,10 @@ TEST(PoseGraph, RejectsBadInput) {
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.error().find("positive definite"), std::string::npos);
   EXPECT_FALSE(pg.optimize().ok());  // no edges
+  EXPECT_TRUE(pg.addLoopEdge(a, b, SE3(), Mat6::Identity()).ok());
+  EXPECT_EQ(pg.numLoopEdges(), 1u);
+  pg.clearLoopEdges();
+  EXPECT_EQ(pg.numLoopEdges(), 0u);
   PoseGraphParams p;
   p.loop_loss = "tukeyish";
   EXPECT_FALSE(p.validate().ok());

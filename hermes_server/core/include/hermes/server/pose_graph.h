@@ -105,6 +105,8 @@ class PoseGraph {
                          const Mat6& information);
   Status addLoopEdge(const KeyframeKey& a, const KeyframeKey& b, const SE3& T_a_b,
                      const Mat6& information);
+  /// Drops every loop edge (e.g. before re-adding the set PCM accepts now).
+  void clearLoopEdges() { loops_.clear(); }
   /// Holds a node constant (gauge).
   Status setFixed(const KeyframeKey& key);
   /// Holds the first (smallest key) node of `agent` constant.
