@@ -165,7 +165,8 @@ LoopClosureResult solveGeneralizedRelativePose(const GeneralizedCorrespondences&
   opengv::transformation_t model = ransac.model_coefficients_;
   std::vector<int> inliers = ransac.inliers_;
 
-  if (params.refine && static_cast<int>(inliers.size()) >= 18) {
+  const auto t_refine = Clock::now();
+  if (params.refine && params.opengv_refine && static_cast<int>(inliers.size()) >= 18) {
     adapter.sett12(model.col(3));
     adapter.setR12(model.block<3, 3>(0, 0));
     const opengv::transformation_t refined =
@@ -182,6 +183,7 @@ LoopClosureResult solveGeneralizedRelativePose(const GeneralizedCorrespondences&
   // Maximum-likelihood refinement (points + pose), re-selection of the inliers
   // by reprojection error (also enforces cheirality) and the edge information.
   const detail::Refinement ref = detail::refineGeneralizedPose(corr, inliers, toSE3(model), params);
+  res.refine_ms = msSince(t_refine);
   res.T_refQ_refC = ref.T_refQ_refC;
   res.inliers = ref.inliers;
   res.num_inliers = static_cast<int>(ref.inliers.size());

@@ -21,6 +21,7 @@ Status LoopClosureParams::read(const Config& config, const std::string& prefix) 
                    config.get(p + "min_inliers", &min_inliers),
                    config.get(p + "min_inlier_ratio", &min_inlier_ratio),
                    config.get(p + "refine", &refine),
+                   config.get(p + "opengv_refine", &opengv_refine),
                    config.get(p + "sigma_floor_px", &sigma_floor_px),
                    config.get(p + "covariance_inflation", &covariance_inflation),
                    config.get(p + "max_translation_sigma_m", &max_translation_sigma_m),
@@ -45,6 +46,7 @@ void LoopClosureParams::write(ConfigWriter* w, const std::string& prefix) const 
   w->set(p + "min_inliers", min_inliers);
   w->set(p + "min_inlier_ratio", min_inlier_ratio);
   w->set(p + "refine", refine);
+  w->set(p + "opengv_refine", opengv_refine);
   w->set(p + "sigma_floor_px", sigma_floor_px);
   w->set(p + "covariance_inflation", covariance_inflation);
   w->set(p + "max_translation_sigma_m", max_translation_sigma_m);

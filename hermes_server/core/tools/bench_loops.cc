@@ -1,7 +1,8 @@
 // hermes_bench_loops: timing and accuracy of the loop back end on synthetic data.
 // Prints JSON (stdout, and --json FILE): 17-point RANSAC per loop attempt for
 // several pre-filters and outlier rates, the full keyframe path (matching +
-// geometry), and pose-graph optimisation time for N nodes.
+// geometry, synthetic descriptors with 30 % wrong ones), and pose-graph
+// optimisation time for N nodes.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -111,8 +112,9 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-nlohmann::json benchRansac(const std::string& prefilter, double outliers, int reps) {
-  std::vector<double> total, ransac, dt, dr;
+nlohmann::json benchRansac(const std::string& prefilter, double outliers, int reps,
+                           bool opengv_refine = true) {
+  std::vector<double> total, ransac, dt, dr, nees;
   int ok = 0;
   for (int rep = 0; rep < reps; ++rep) {
     std::mt19937 rng(1000 + rep);
@@ -122,6 +124,7 @@ nlohmann::json benchRansac(const std::string& prefilter, double outliers, int re
     p.prefilter_pairs = prefilter != "none";
     if (p.prefilter_pairs) p.prefilter_solver = prefilter;
     p.ransac_max_iterations = 20000;
+    p.opengv_refine = opengv_refine;
     const LoopClosureResult r = solveGeneralizedRelativePose(corr, p);
     total.push_back(r.time_ms);
     ransac.push_back(r.ransac_ms);
@@ -129,11 +132,76 @@ nlohmann::json benchRansac(const std::string& prefilter, double outliers, int re
     ++ok;
     dt.push_back(translationalDistance(r.T_refQ_refC, s.truth));
     dr.push_back(angularDistance(r.T_refQ_refC, s.truth) / kDeg);
+    const Vec6 e = (s.truth.inverse() * r.T_refQ_refC).log();
+    nees.push_back(e.dot(r.information * e));
   }
-  return {{"prefilter", prefilter}, {"outlier_fraction", outliers}, {"correspondences_inliers", 240},
+  return {{"prefilter", prefilter}, {"opengv_refine", opengv_refine}, {"outlier_fraction", outliers}, {"correspondences_inliers", 240},
           {"cameras_per_rig", 4}, {"success_rate", double(ok) / reps},
           {"time_ms_median", median(total)}, {"ransac17_ms_median", median(ransac)},
-          {"trans_err_m_median", median(dt)}, {"rot_err_deg_median", median(dr)}};
+          {"trans_err_m_median", median(dt)}, {"rot_err_deg_median", median(dr)},
+          {"nees_median", median(nees)}};  // 6-dof: ~5.3 when the information is calibrated
+}
+
+std::vector<Keyframe> makeKeyframes(const std::vector<SE3>& T_W_C, const std::vector<Vec3>& pts,
+                                    const std::vector<Descriptor>& desc, std::mt19937& rng) {
+  std::vector<Keyframe> out;
+  std::uniform_real_distribution<double> u(0, 1);
+  std::uniform_int_distribution<int> bit(0, 255), pick(0, static_cast<int>(pts.size()) - 1);
+  for (std::size_t c = 0; c < T_W_C.size(); ++c) {
+    Keyframe kf;
+    kf.id = c;
+    kf.T_A_C = T_W_C[c];
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      Vec2 uv;
+      if (!project(T_W_C[c], pts[i], rng, &uv)) continue;
+      Keypoint kp;
+      kp.u = static_cast<float>(uv.x());
+      kp.v = static_cast<float>(uv.y());
+      kf.keypoints.push_back(kp);
+      Descriptor d = desc[u(rng) < 0.3 ? pick(rng) : i];  // 30 % wrong descriptors
+      for (int f = 0; f < 4; ++f) {
+        const int k = bit(rng);
+        d[k / 8] ^= static_cast<std::uint8_t>(1u << (k % 8));
+      }
+      kf.descriptors.push_back(d);
+      kf.keypoint_landmark.push_back(kInvalidId);
+    }
+    out.push_back(std::move(kf));
+  }
+  return out;
+}
+
+nlohmann::json benchFullPath(int points, int reps) {
+  std::vector<double> total, dt, pre, rans, refine;
+  int ok = 0, keypoints = 0, matches = 0;
+  for (int rep = 0; rep < reps; ++rep) {
+    std::mt19937 rng(2000 + rep);
+    const Scene s = makeScene(rng, points, 4);
+    std::vector<Descriptor> desc(points);
+    std::uniform_int_distribution<int> b(0, 255);
+    for (auto& d : desc) for (auto& x : d) x = static_cast<std::uint8_t>(b(rng));
+    const auto q = makeKeyframes(s.T_W_Q, s.points, desc, rng);
+    const auto c = makeKeyframes(s.T_W_C, s.points, desc, rng);
+    keypoints = static_cast<int>(q[0].keypoints.size());
+    const std::vector<PinholeIntrinsics> cams{camera()};
+    LoopCloser closer{LoopClosureParams{}};
+    const auto t0 = Clock::now();
+    const LoopClosureResult r = closer.close(q[0], {&q[1], &q[2], &q[3]}, cams, c[0],
+                                             {&c[1], &c[2], &c[3]}, cams);
+    total.push_back(msSince(t0));
+    pre.push_back(r.prefilter_ms);
+    rans.push_back(r.ransac_ms);
+    refine.push_back(r.refine_ms);
+    matches = r.num_matches;
+    if (!r.ok()) continue;
+    ++ok;
+    dt.push_back(translationalDistance(r.T_refQ_refC, s.truth));
+  }
+  return {{"scene_points", points}, {"keypoints_per_keyframe", keypoints}, {"keyframes_per_rig", 4},
+          {"matches", matches}, {"success_rate", double(ok) / reps}, {"time_ms_median", median(total)},
+          {"prefilter_ms_median", median(pre)}, {"ransac17_ms_median", median(rans)},
+          {"refine_ms_median", median(refine)},
+          {"trans_err_m_median", median(dt)}};
 }
 
 nlohmann::json benchPoseGraph(int nodes) {
@@ -201,6 +269,9 @@ int main(int argc, char** argv) {
     for (double o : {0.3, 0.5}) out["ransac17"].push_back(benchRansac(pre, o, reps));
   }
   out["ransac17"].push_back(benchRansac("none", 0.3, reps));
+  out["ransac17"].push_back(benchRansac("nister", 0.3, reps, false));
+  out["full_path"] = nlohmann::json::array();
+  for (int pts : {800, 2000}) out["full_path"].push_back(benchFullPath(pts, reps));
   out["pose_graph"] = nlohmann::json::array();
   for (int n : {500, 2000, 8000}) out["pose_graph"].push_back(benchPoseGraph(n));
   const std::string text = out.dump(2);

@@ -3,8 +3,8 @@
 // keyframe + m neighbours form two metric multi-camera rigs; descriptors are
 // matched rig to rig, outliers are removed per camera pair with a central 5-point
 // RANSAC (optional pre-filter), the relative pose is found by OpenGV's non-central
-// RANSAC with Li's 17-point solver, refined by OpenGV's non-linear optimiser and
-// then by a small bundle adjustment (Ceres: pose + inlier points, pixel
+// RANSAC with Li's 17-point solver, refined (optionally by OpenGV's non-linear
+// optimiser first, then) by a small bundle adjustment (Ceres: pose + inlier points, pixel
 // residuals); the 6x6 information is the Schur complement of the points in the
 // bundle-adjustment Hessian, scaled by the estimated pixel noise (with a floor).
 //
@@ -37,7 +37,9 @@ struct LoopClosureParams {
   int min_matches = 30;               ///< fewer putative correspondences: fail without RANSAC
   int min_inliers = 25;               ///< final inliers required
   double min_inlier_ratio = 0.15;     ///< final inliers / putative correspondences
-  bool refine = true;                 ///< OpenGV non-linear refinement on the inliers
+  bool refine = true;                 ///< bundle-adjustment refinement (Ceres) of pose + inlier points
+  bool opengv_refine = true;          ///< run opengv::relative_pose::optimize_nonlinear first and
+                                      ///< re-select inliers (better start for the bundle adjustment)
   double sigma_floor_px = 0.5;        ///< floor on the bearing noise used for the information [px]
   double covariance_inflation = 1.0;  ///< covariance multiplier (>= 1 is conservative)
   double max_translation_sigma_m = 0.25;  ///< reject when translation is this poorly constrained [m]
@@ -90,6 +92,7 @@ struct LoopClosureResult {
   double time_ms = 0;             ///< total (matching + geometry)
   double prefilter_ms = 0;        ///< per-pair 5-point pre-filter
   double ransac_ms = 0;           ///< 17-point RANSAC alone
+  double refine_ms = 0;           ///< OpenGV refinement + bundle adjustment + information
 
   bool ok() const { return status == LoopStatus::kAccepted; }
 };
