@@ -59,10 +59,12 @@ Expected<Mat6> sqrtInformation(const Mat6& information) {
   return Mat6(llt.matrixU());
 }
 
+namespace {
 std::string toString(const KeyframeKey& key) {
   return "(agent " + std::to_string(key.agent) + ", session " + std::to_string(key.session) +
          ", keyframe " + std::to_string(key.id) + ")";
 }
+}  // namespace
 
 PoseGraph::PoseGraph(const PoseGraphParams& params) : params_(params) {}
 

@@ -143,7 +143,5 @@ class PoseGraph {
   std::vector<Edge> loops_;
 };
 
-std::string toString(const KeyframeKey& key);
-
 }  // namespace server
 }  // namespace hermes
