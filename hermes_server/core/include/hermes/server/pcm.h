@@ -1,0 +1,103 @@
+// Pairwise consistent measurement set maximisation (PCM, DESIGN.md §5): loops
+// between the same two trajectories (agent, session) — or within one — are
+// pairwise consistent when the cycle
+//   T_ai_aj (odometry of a) * T_aj_bj (loop j) * T_bj_bi (odometry of b) * T_bi_ai (loop i)
+// is near identity: the Mahalanobis distance of its SE(3) log under the
+// first-order propagated covariance is below the chi-square quantile (6 dof).
+// The largest set of mutually consistent loops (maximum clique of the
+// consistency graph) is accepted: exact branch and bound with a greedy-colouring
+// bound up to `exact_max_loops` loops per group, beyond that a greedy heuristic
+// (grow a clique from each vertex by repeatedly adding the candidate with the
+// most neighbours among the remaining candidates; keep the largest).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "hermes/core/config.h"
+#include "hermes/core/geometry.h"
+#include "hermes/core/map_types.h"
+#include "hermes/core/status.h"
+
+namespace hermes {
+namespace server {
+
+struct PcmParams {
+  double chi2_probability = 0.99;  ///< consistency gate: chi2 quantile of this probability
+  int exact_max_loops = 40;        ///< exact maximum clique up to this many loops per group (<= 64)
+  int min_clique_size = 1;         ///< a group's clique smaller than this is rejected
+
+  Status read(const Config& config, const std::string& prefix);
+  void write(ConfigWriter* writer, const std::string& prefix) const;
+  Status validate() const;
+};
+
+/// A loop between keyframe a and keyframe b (T_a_b: b in a), with the covariance
+/// of its right perturbation T_a_b * exp(xi), xi = [rho; phi].
+struct LoopCandidate {
+  std::uint64_t id = 0;
+  KeyframeKey a, b;
+  SE3 T_a_b;
+  Mat6 covariance = Mat6::Identity();
+};
+
+struct RelativePose {
+  SE3 T;                        ///< T_from_to
+  Mat6 covariance = Mat6::Zero();  ///< right perturbation
+};
+
+/// Odometry between two keyframes of one trajectory (same agent and session).
+using OdometryQuery =
+    std::function<Expected<RelativePose>(const KeyframeKey& from, const KeyframeKey& to)>;
+
+/// Keyframe poses T_A_K and odometry edge covariances of each trajectory;
+/// answers OdometryQuery by composing the edges between the two keyframes.
+class OdometryChain {
+ public:
+  Status addKeyframe(const KeyframeKey& key, const SE3& T_A_K);
+  /// Edge between consecutive keyframes (by id) of one trajectory.
+  Status addEdge(const KeyframeKey& from, const KeyframeKey& to, const Mat6& information);
+  Expected<RelativePose> relative(const KeyframeKey& from, const KeyframeKey& to) const;
+  OdometryQuery query() const;
+
+ private:
+  struct Entry {
+    SE3 T_A_K;
+    bool has_edge_to_next = false;
+    Mat6 covariance_to_next = Mat6::Zero();  ///< of T_k_next (right perturbation)
+  };
+  using Trajectory = std::map<KeyframeId, Entry>;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, Trajectory> trajectories_;
+};
+
+struct PcmResult {
+  std::vector<std::uint64_t> accepted;
+  std::vector<std::uint64_t> rejected;
+  int groups = 0;               ///< trajectory pairs seen
+  bool all_exact = true;        ///< false when some group used the greedy heuristic
+  int odometry_failures = 0;    ///< loop pairs whose odometry was unavailable (counted inconsistent)
+  double time_ms = 0;
+};
+
+/// Runs PCM over all candidates (grouped by trajectory pair).
+PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
+                                const OdometryQuery& odometry, const PcmParams& params);
+
+/// Squared Mahalanobis distance of the cycle formed by loops i and j (both
+/// oriented from trajectory A to trajectory B). Errors come from the odometry.
+Expected<double> cycleMahalanobis2(const LoopCandidate& i, const LoopCandidate& j,
+                                   const OdometryQuery& odometry);
+
+/// Quantile of the chi-square distribution (probability p, dof degrees of freedom).
+double chi2Quantile(double p, int dof);
+
+/// Maximum clique of an undirected graph (adjacency[i][j] symmetric). Exact for
+/// n <= exact_max (<= 64), greedy beyond; *exact tells which was used.
+std::vector<int> maximumClique(const std::vector<std::vector<char>>& adjacency, int exact_max,
+                               bool* exact);
+
+}  // namespace server
+}  // namespace hermes

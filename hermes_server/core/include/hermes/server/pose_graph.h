@@ -1,0 +1,147 @@
+// SE(3) pose graph over keyframes of all agents (DESIGN.md §5 "Pose graph"):
+// Ceres, quaternion (EigenQuaternionManifold) + translation per node, odometry and
+// loop edges as whitened 6-dof relative-pose residuals, robust loss on loop edges
+// only, SPARSE_NORMAL_CHOLESKY (SuiteSparse). The gauge is fixed by holding
+// chosen nodes constant (the anchor agent's first keyframe).
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include <ceres/ceres.h>
+
+#include "hermes/core/config.h"
+#include "hermes/core/geometry.h"
+#include "hermes/core/map_types.h"
+#include "hermes/core/status.h"
+
+namespace hermes {
+namespace server {
+
+struct PoseGraphParams {
+  std::string loop_loss = "cauchy";  ///< none | huber | cauchy (loop edges only)
+  double loop_loss_scale = 1.0;      ///< loss scale on the whitened residual norm [sigma]
+  /// Continuation on the robust loss: solve with scales loop_loss_scale *
+  /// anneal_factor^(anneal_steps-1), ..., loop_loss_scale. Without it, loops far
+  /// from a drifted initial guess all look like outliers and are ignored.
+  int anneal_steps = 4;
+  double anneal_factor = 4.0;
+  int max_iterations = 100;
+  double function_tolerance = 1e-8;
+  int num_threads = 1;
+
+  Status read(const Config& config, const std::string& prefix);
+  void write(ConfigWriter* writer, const std::string& prefix) const;
+  Status validate() const;
+};
+
+/// Relative-pose residual between nodes a and b (poses T_W_a, T_W_b stored as
+/// quaternion [x y z w] + translation). With the error transform
+///   T_err = T_a_b_meas^-1 * T_W_a^-1 * T_W_b,
+/// e = [t_err; 2 vec(q_err)] (sign chosen so that w >= 0), which equals the SE(3)
+/// log [rho; phi] to first order, and residual = sqrt_information * e with
+/// sqrt_informationᵀ sqrt_information = information.
+struct RelativePoseError {
+  RelativePoseError(const SE3& T_a_b, const Mat6& sqrt_information)
+      : T_a_b_(T_a_b), sqrt_information_(sqrt_information) {}
+
+  template <typename T>
+  bool operator()(const T* q_a, const T* t_a, const T* q_b, const T* t_b, T* residual) const {
+    using Q = Eigen::Quaternion<T>;
+    using V = Eigen::Matrix<T, 3, 1>;
+    const Q qa(q_a[3], q_a[0], q_a[1], q_a[2]);
+    const Q qb(q_b[3], q_b[0], q_b[1], q_b[2]);
+    const V ta(t_a[0], t_a[1], t_a[2]);
+    const V tb(t_b[0], t_b[1], t_b[2]);
+    // Estimated relative pose T_a_b = T_W_a^-1 T_W_b.
+    const Q qa_inv = qa.conjugate();
+    const Q q_ab = qa_inv * qb;
+    const V t_ab = qa_inv * (tb - ta);
+    // Error against the measurement.
+    const Q qm_inv = T_a_b_.quat().conjugate().template cast<T>();
+    const Q q_err = qm_inv * q_ab;
+    const V t_err = qm_inv * (t_ab - T_a_b_.translation().template cast<T>());
+    const T sign = q_err.w() < T(0) ? T(-1) : T(1);
+    Eigen::Matrix<T, 6, 1> e;
+    e.template head<3>() = t_err;
+    e.template tail<3>() = T(2) * sign * q_err.vec();
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> r(residual);
+    r = sqrt_information_.template cast<T>() * e;
+    return true;
+  }
+
+  /// Cost function with blocks (q_a 4, t_a 3, q_b 4, t_b 3).
+  static ceres::CostFunction* create(const SE3& T_a_b, const Mat6& sqrt_information);
+
+ private:
+  SE3 T_a_b_;
+  Mat6 sqrt_information_;
+};
+
+/// Upper-triangular square root L of a symmetric positive definite information
+/// (Lᵀ L = information); an error when it is not positive definite or not finite.
+Expected<Mat6> sqrtInformation(const Mat6& information);
+
+struct PoseGraphResult {
+  double initial_cost = 0;
+  double final_cost = 0;
+  int iterations = 0;             ///< summed over the annealing stages
+  double time_ms = 0;
+  bool converged = false;
+  std::string report;  ///< Ceres brief report
+};
+
+class PoseGraph {
+ public:
+  explicit PoseGraph(const PoseGraphParams& params = PoseGraphParams());
+
+  /// Adds a node with its initial world pose. For a non-anchor agent pass
+  /// T_W_A (the current estimate of its frame) * T_A_K.
+  Status addNode(const KeyframeKey& key, const SE3& T_W_K);
+  /// Convenience: every keyframe pose T_A_K of one agent, placed with T_W_A.
+  Status addAgentNodes(const std::vector<std::pair<KeyframeKey, SE3>>& T_A_K, const SE3& T_W_A);
+  Status addOdometryEdge(const KeyframeKey& from, const KeyframeKey& to, const SE3& T_from_to,
+                         const Mat6& information);
+  Status addLoopEdge(const KeyframeKey& a, const KeyframeKey& b, const SE3& T_a_b,
+                     const Mat6& information);
+  /// Drops every loop edge (e.g. before re-adding the set PCM accepts now).
+  void clearLoopEdges() { loops_.clear(); }
+  /// Holds a node constant (gauge).
+  Status setFixed(const KeyframeKey& key);
+  /// Holds the first (smallest key) node of `agent` constant.
+  Status fixFirstPoseOf(std::uint32_t agent);
+
+  /// Optimises all nodes connected by edges. Without any fixed node the
+  /// smallest key is fixed. Errors name an unusable problem (no edges).
+  Expected<PoseGraphResult> optimize();
+
+  bool hasNode(const KeyframeKey& key) const { return nodes_.count(key) > 0; }
+  Expected<SE3> pose(const KeyframeKey& key) const;
+  std::map<KeyframeKey, SE3> poses() const;
+  std::size_t numNodes() const { return nodes_.size(); }
+  std::size_t numOdometryEdges() const { return odometry_.size(); }
+  std::size_t numLoopEdges() const { return loops_.size(); }
+
+ private:
+  struct Node {
+    std::array<double, 4> q;  // x y z w
+    std::array<double, 3> t;
+    bool fixed = false;
+  };
+  struct Edge {
+    KeyframeKey a, b;
+    SE3 T_a_b;
+    Mat6 sqrt_information;
+  };
+  Status addEdge(const KeyframeKey& a, const KeyframeKey& b, const SE3& T_a_b,
+                 const Mat6& information, const char* kind, std::vector<Edge>* edges);
+
+  PoseGraphParams params_;
+  std::map<KeyframeKey, Node> nodes_;
+  std::vector<Edge> odometry_;
+  std::vector<Edge> loops_;
+};
+
+}  // namespace server
+}  // namespace hermes

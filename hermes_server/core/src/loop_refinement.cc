@@ -1,0 +1,199 @@
+#include "loop_refinement.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <ceres/ceres.h>
+#include <Eigen/Eigenvalues>
+
+namespace hermes {
+namespace server {
+namespace detail {
+
+namespace {
+
+/// Pixel residual of a point (query reference frame) seen by a query camera.
+struct QueryReprojection {
+  QueryReprojection(const SE3& T_refQ_C, const Vec3& bearing, double focal)
+      : T_C_ref(T_refQ_C.inverse()), obs(bearing.head<2>() / bearing.z()), f(focal) {}
+  template <typename T>
+  bool operator()(const T* p, T* r) const {
+    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
+    const Eigen::Matrix<T, 3, 1> pc = T_C_ref.rotation().cast<T>() * P + T_C_ref.translation().cast<T>();
+    if (pc.z() <= T(1e-9)) return false;
+    r[0] = T(f) * (pc.x() / pc.z() - T(obs.x()));
+    r[1] = T(f) * (pc.y() / pc.z() - T(obs.y()));
+    return true;
+  }
+  SE3 T_C_ref;
+  Vec2 obs;
+  double f;
+};
+
+/// Pixel residual of the same point seen by a candidate camera; depends on the
+/// pose T_refQ_refC = (q [x y z w], t).
+struct CandidateReprojection {
+  CandidateReprojection(const SE3& T_refC_C, const Vec3& bearing, double focal)
+      : T_C_ref(T_refC_C.inverse()), obs(bearing.head<2>() / bearing.z()), f(focal) {}
+  template <typename T>
+  bool operator()(const T* q, const T* t, const T* p, T* r) const {
+    const Eigen::Quaternion<T> Q(q[3], q[0], q[1], q[2]);
+    const Eigen::Matrix<T, 3, 1> tt(t[0], t[1], t[2]);
+    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
+    const Eigen::Matrix<T, 3, 1> p_refC = Q.conjugate() * (P - tt);
+    const Eigen::Matrix<T, 3, 1> pc =
+        T_C_ref.rotation().cast<T>() * p_refC + T_C_ref.translation().cast<T>();
+    if (pc.z() <= T(1e-9)) return false;
+    r[0] = T(f) * (pc.x() / pc.z() - T(obs.x()));
+    r[1] = T(f) * (pc.y() / pc.z() - T(obs.y()));
+    return true;
+  }
+  SE3 T_C_ref;
+  Vec2 obs;
+  double f;
+};
+
+/// Midpoint triangulation in the query reference frame; false when parallel or
+/// behind a camera.
+bool triangulate(const GeneralizedCorrespondences& corr, int i, const SE3& T, Vec3* p) {
+  const SE3& Tq = corr.T_refQ_Cq[corr.cam_q[i]];
+  const SE3 Tc = T * corr.T_refC_Cc[corr.cam_c[i]];
+  const Vec3 c1 = Tq.translation(), d1 = Tq.quat() * corr.bearings_q[i];
+  const Vec3 c2 = Tc.translation(), d2 = Tc.quat() * corr.bearings_c[i];
+  const Vec3 w = c1 - c2;
+  const double b = d1.dot(d2), d = d1.dot(w), e = d2.dot(w);
+  const double denom = 1.0 - b * b;
+  if (denom < 1e-10) return false;
+  const double l1 = (b * e - d) / denom, l2 = (e - b * d) / denom;
+  if (l1 <= 0 || l2 <= 0) return false;
+  *p = 0.5 * ((c1 + l1 * d1) + (c2 + l2 * d2));
+  return true;
+}
+
+/// Both pixel residuals of one correspondence (4 values).
+Eigen::Vector4d residuals(const QueryReprojection& rq, const CandidateReprojection& rc,
+                          const SE3& T, const Vec3& p) {
+  Eigen::Vector4d r = Eigen::Vector4d::Constant(1e6);
+  const Eigen::Vector4d qc = T.quat().coeffs();  // x y z w
+  rq(p.data(), r.data());
+  rc(qc.data(), T.translation().data(), p.data(), r.data() + 2);
+  return r;
+}
+
+}  // namespace
+
+Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
+                                 const std::vector<int>& inliers, const SE3& T0,
+                                 const LoopClosureParams& params) {
+  Refinement out;
+  const double f = corr.focal_px;
+  std::vector<int> ids;
+  std::vector<Vec3> points;
+  for (int i : inliers) {
+    Vec3 p;
+    if (triangulate(corr, i, T0, &p)) {
+      ids.push_back(i);
+      points.push_back(p);
+    }
+  }
+  Eigen::Vector4d q = T0.quat().coeffs();
+  Vec3 t = T0.translation();
+  std::vector<QueryReprojection> rqs;
+  std::vector<CandidateReprojection> rcs;
+  for (int i : ids) {
+    rqs.emplace_back(corr.T_refQ_Cq[corr.cam_q[i]], corr.bearings_q[i], f);
+    rcs.emplace_back(corr.T_refC_Cc[corr.cam_c[i]], corr.bearings_c[i], f);
+  }
+
+  if (params.refine && ids.size() >= 18) {
+    ceres::Problem::Options popt;
+    popt.manifold_ownership = ceres::TAKE_OWNERSHIP;
+    ceres::Problem problem(popt);
+    problem.AddParameterBlock(q.data(), 4, new ceres::EigenQuaternionManifold());
+    problem.AddParameterBlock(t.data(), 3);
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<QueryReprojection, 2, 3>(new QueryReprojection(rqs[k])),
+          new ceres::HuberLoss(params.ransac_threshold_px), points[k].data());
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<CandidateReprojection, 2, 4, 3, 3>(
+                                   new CandidateReprojection(rcs[k])),
+                               new ceres::HuberLoss(params.ransac_threshold_px), q.data(),
+                               t.data(), points[k].data());
+    }
+    ceres::Solver::Options opt;
+    opt.linear_solver_type = ceres::DENSE_SCHUR;
+    opt.max_num_iterations = 20;
+    opt.num_threads = 1;
+    opt.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(opt, &problem, &summary);
+    out.iterations = static_cast<int>(summary.iterations.size());
+    if (!summary.IsSolutionUsable() || !q.allFinite() || !t.allFinite()) {
+      q = T0.quat().coeffs();
+      t = T0.translation();
+      for (std::size_t k = 0; k < ids.size(); ++k) triangulate(corr, ids[k], T0, &points[k]);
+    }
+  }
+  const SE3 T(Quat(q(3), q(0), q(1), q(2)), t);
+  out.T_refQ_refC = T;
+
+  // Inliers by reprojection error in both views; information by Schur complement.
+  Mat6 info = Mat6::Zero();
+  double sq_sum = 0;
+  const double h = 1e-6;
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    const Eigen::Vector4d r = residuals(rqs[k], rcs[k], T, points[k]);
+    if (!(r.head<2>().norm() < params.ransac_threshold_px && r.tail<2>().norm() < params.ransac_threshold_px)) {
+      continue;
+    }
+    Eigen::Matrix<double, 4, 9> J;
+    for (int j = 0; j < 9; ++j) {
+      Vec6 xi = Vec6::Zero();
+      Vec3 dp = Vec3::Zero();
+      if (j < 6) xi(j) = h; else dp(j - 6) = h;
+      J.col(j) = (residuals(rqs[k], rcs[k], T * SE3::exp(xi), points[k] + dp) -
+                  residuals(rqs[k], rcs[k], T * SE3::exp(-xi), points[k] - dp)) / (2 * h);
+    }
+    const Eigen::Matrix<double, 4, 6> Jx = J.leftCols<6>();
+    const Eigen::Matrix<double, 4, 3> Jp = J.rightCols<3>();
+    const Mat3 Hpp = Jp.transpose() * Jp;
+    Eigen::SelfAdjointEigenSolver<Mat3> ep(Hpp);
+    if (!(ep.eigenvalues()(0) > 1e-9 * ep.eigenvalues()(2))) continue;
+    const Eigen::Matrix<double, 3, 6> Hpx = Jp.transpose() * Jx;
+    info += Jx.transpose() * Jx - Hpx.transpose() * Hpp.inverse() * Hpx;
+    sq_sum += r.squaredNorm();
+    out.inliers.push_back(ids[k]);
+  }
+  const int n = static_cast<int>(out.inliers.size());
+  if (n < 7) {
+    out.reason = "only " + std::to_string(n) + " well-triangulated inliers";
+    return out;
+  }
+  // 4 residuals and 3 point parameters per inlier, 6 pose parameters.
+  const double sigma = std::max(std::sqrt(sq_sum / (n - 6)), params.sigma_floor_px);
+  out.sigma_px = sigma;
+  info /= sigma * sigma * params.covariance_inflation;
+  info = 0.5 * (info + info.transpose()).eval();
+  Eigen::SelfAdjointEigenSolver<Mat6> eig(info);
+  if (!(eig.eigenvalues().minCoeff() > 1e-9 * eig.eigenvalues().maxCoeff()) ||
+      !(eig.eigenvalues().minCoeff() > 0)) {
+    out.reason = "information is rank deficient (degenerate rig geometry)";
+    return out;
+  }
+  out.information = info;
+  out.covariance = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *
+                   eig.eigenvectors().transpose();
+  Eigen::SelfAdjointEigenSolver<Mat3> et(out.covariance.topLeftCorner<3, 3>());
+  const double sigma_t = std::sqrt(std::max(0.0, et.eigenvalues().maxCoeff()));
+  if (sigma_t > params.max_translation_sigma_m) {
+    out.reason = "translation poorly constrained (sigma " + std::to_string(sigma_t) + " m > " +
+                 std::to_string(params.max_translation_sigma_m) + " m)";
+    return out;
+  }
+  out.ok = true;
+  return out;
+}
+
+}  // namespace detail
+}  // namespace server
+}  // namespace hermes

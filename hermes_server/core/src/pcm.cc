@@ -1,0 +1,188 @@
+#include "hermes/server/pcm.h"
+
+#include <chrono>
+
+#include <Eigen/Cholesky>
+
+namespace hermes {
+namespace server {
+
+namespace {
+
+std::string keyText(const KeyframeKey& k) {
+  return "(agent " + std::to_string(k.agent) + ", session " + std::to_string(k.session) +
+         ", keyframe " + std::to_string(k.id) + ")";
+}
+
+using TrajectoryId = std::pair<std::uint32_t, std::uint32_t>;
+TrajectoryId trajectoryOf(const KeyframeKey& k) { return {k.agent, k.session}; }
+
+/// The loop seen from b: T_b_a with the covariance of its right perturbation.
+LoopCandidate reversed(const LoopCandidate& l) {
+  LoopCandidate r = l;
+  r.a = l.b;
+  r.b = l.a;
+  r.T_a_b = l.T_a_b.inverse();
+  const Mat6 Ad = l.T_a_b.adjoint();  // (T exp(x))^-1 = T^-1 exp(-Ad_T x)
+  r.covariance = Ad * l.covariance * Ad.transpose();
+  return r;
+}
+
+}  // namespace
+
+Status PcmParams::read(const Config& config, const std::string& prefix) {
+  const std::string p = prefix + ".";
+  for (Status s : {config.get(p + "chi2_probability", &chi2_probability),
+                   config.get(p + "exact_max_loops", &exact_max_loops),
+                   config.get(p + "min_clique_size", &min_clique_size)}) {
+    if (!s) return s;
+  }
+  if (Status s = validate(); !s) return Error{prefix + ": " + s.error()};
+  return Status::Ok();
+}
+
+void PcmParams::write(ConfigWriter* w, const std::string& prefix) const {
+  w->set(prefix + ".chi2_probability", chi2_probability);
+  w->set(prefix + ".exact_max_loops", exact_max_loops);
+  w->set(prefix + ".min_clique_size", min_clique_size);
+}
+
+Status PcmParams::validate() const {
+  if (!(chi2_probability > 0 && chi2_probability < 1)) return Error{"chi2_probability must be in (0, 1)"};
+  if (exact_max_loops < 0 || exact_max_loops > 64) return Error{"exact_max_loops must be in [0, 64]"};
+  if (min_clique_size < 1) return Error{"min_clique_size must be >= 1"};
+  return Status::Ok();
+}
+
+Status OdometryChain::addKeyframe(const KeyframeKey& key, const SE3& T_A_K) {
+  Trajectory& traj = trajectories_[trajectoryOf(key)];
+  if (traj.count(key.id)) return Error{"odometry chain: keyframe " + keyText(key) + " added twice"};
+  traj[key.id].T_A_K = T_A_K;
+  return Status::Ok();
+}
+
+Status OdometryChain::addEdge(const KeyframeKey& from, const KeyframeKey& to,
+                              const Mat6& information) {
+  const std::string what = "odometry chain: edge " + keyText(from) + " -> " + keyText(to);
+  if (trajectoryOf(from) != trajectoryOf(to)) return Error{what + " joins two trajectories"};
+  auto tit = trajectories_.find(trajectoryOf(from));
+  if (tit == trajectories_.end()) return Error{what + ": unknown trajectory"};
+  Trajectory& traj = tit->second;
+  auto it = traj.find(from.id);
+  if (it == traj.end() || !traj.count(to.id)) return Error{what + ": unknown keyframe"};
+  auto next = std::next(it);
+  if (next == traj.end() || next->first != to.id) {
+    return Error{what + ": keyframes are not consecutive"};
+  }
+  Eigen::LDLT<Mat6> ldlt(0.5 * (information + information.transpose()));
+  if (ldlt.info() != Eigen::Success || !ldlt.isPositive() || !information.allFinite()) {
+    return Error{what + ": information is not positive definite"};
+  }
+  it->second.has_edge_to_next = true;
+  it->second.covariance_to_next = ldlt.solve(Mat6::Identity());
+  return Status::Ok();
+}
+
+Expected<RelativePose> OdometryChain::relative(const KeyframeKey& from, const KeyframeKey& to) const {
+  const std::string what = "odometry " + keyText(from) + " -> " + keyText(to);
+  if (trajectoryOf(from) != trajectoryOf(to)) return Error{what + ": different trajectories"};
+  auto tit = trajectories_.find(trajectoryOf(from));
+  if (tit == trajectories_.end()) return Error{what + ": unknown trajectory"};
+  const Trajectory& traj = tit->second;
+  const bool forward = from.id <= to.id;
+  const KeyframeId lo = forward ? from.id : to.id, hi = forward ? to.id : from.id;
+  auto it_lo = traj.find(lo), it_hi = traj.find(hi);
+  if (it_lo == traj.end() || it_hi == traj.end()) return Error{what + ": unknown keyframe"};
+  // T_lo_hi = E_0 E_1 ... E_{n-1}; walking backwards, G = product of the later
+  // edges, and each edge's perturbation enters as Ad(G^-1).
+  RelativePose out;
+  const SE3 T_lo_hi = it_lo->second.T_A_K.inverse() * it_hi->second.T_A_K;
+  SE3 G;  // T_{k+1}_hi
+  for (auto it = it_hi; it != it_lo;) {
+    auto prev = std::prev(it);
+    if (!prev->second.has_edge_to_next) {
+      return Error{what + ": missing odometry edge after keyframe " + std::to_string(prev->first)};
+    }
+    const Mat6 A = G.inverse().adjoint();
+    out.covariance += A * prev->second.covariance_to_next * A.transpose();
+    G = prev->second.T_A_K.inverse() * it->second.T_A_K * G;
+    it = prev;
+  }
+  if (forward) {
+    out.T = T_lo_hi;
+  } else {
+    const Mat6 Ad = T_lo_hi.adjoint();
+    out.T = T_lo_hi.inverse();
+    out.covariance = Ad * out.covariance * Ad.transpose();
+  }
+  return out;
+}
+
+OdometryQuery OdometryChain::query() const {
+  return [this](const KeyframeKey& from, const KeyframeKey& to) { return relative(from, to); };
+}
+
+Expected<double> cycleMahalanobis2(const LoopCandidate& i, const LoopCandidate& j,
+                                   const OdometryQuery& odometry) {
+  Expected<RelativePose> oa = odometry(i.a, j.a);  // T_ai_aj
+  if (!oa) return Error{oa.error()};
+  Expected<RelativePose> ob = odometry(j.b, i.b);  // T_bj_bi
+  if (!ob) return Error{ob.error()};
+  // C = X1 X2 X3 X4 with X1 = T_ai_aj, X2 = T_aj_bj, X3 = T_bj_bi, X4 = T_bi_ai.
+  const SE3 X4 = i.T_a_b.inverse();
+  const SE3 X34 = ob->T * X4;
+  const SE3 X234 = j.T_a_b * X34;
+  const SE3 C = oa->T * X234;
+  const Mat6 A1 = X234.inverse().adjoint(), A2 = X34.inverse().adjoint(), A3 = X4.inverse().adjoint();
+  const Mat6 A4 = i.T_a_b.adjoint();  // (Z exp(x))^-1 = Z^-1 exp(-Ad_Z x)
+  const Mat6 cov = A1 * oa->covariance * A1.transpose() + A2 * j.covariance * A2.transpose() +
+                   A3 * ob->covariance * A3.transpose() + A4 * i.covariance * A4.transpose();
+  const Vec6 e = C.log();
+  Eigen::LDLT<Mat6> ldlt(cov);
+  if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
+    return Error{"cycle covariance of loops " + std::to_string(i.id) + " and " +
+                 std::to_string(j.id) + " is not positive definite"};
+  }
+  return e.dot(ldlt.solve(e));
+}
+
+PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
+                                const OdometryQuery& odometry, const PcmParams& params) {
+  const auto t0 = std::chrono::steady_clock::now();
+  PcmResult res;
+  const double gate = chi2Quantile(params.chi2_probability, 6);
+  // Group by unordered trajectory pair; orient every loop from the smaller trajectory.
+  std::map<std::pair<TrajectoryId, TrajectoryId>, std::vector<LoopCandidate>> groups;
+  for (const LoopCandidate& l : loops) {
+    const LoopCandidate o = trajectoryOf(l.b) < trajectoryOf(l.a) ? reversed(l) : l;
+    groups[{trajectoryOf(o.a), trajectoryOf(o.b)}].push_back(o);
+  }
+  res.groups = static_cast<int>(groups.size());
+  for (const auto& [pair, group] : groups) {
+    const int n = static_cast<int>(group.size());
+    std::vector<std::vector<char>> adj(n, std::vector<char>(n, 0));
+    for (int i = 0; i < n; ++i) {
+      for (int j = i + 1; j < n; ++j) {
+        Expected<double> d2 = cycleMahalanobis2(group[i], group[j], odometry);
+        if (!d2) {
+          ++res.odometry_failures;
+          continue;
+        }
+        adj[i][j] = adj[j][i] = *d2 < gate;
+      }
+    }
+    bool exact = true;
+    const std::vector<int> clique = maximumClique(adj, params.exact_max_loops, &exact);
+    res.all_exact = res.all_exact && exact;
+    std::vector<char> in(n, 0);
+    if (static_cast<int>(clique.size()) >= params.min_clique_size) {
+      for (int v : clique) in[v] = 1;
+    }
+    for (int i = 0; i < n; ++i) (in[i] ? res.accepted : res.rejected).push_back(group[i].id);
+  }
+  res.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
+
+}  // namespace server
+}  // namespace hermes

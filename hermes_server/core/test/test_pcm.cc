@@ -1,0 +1,248 @@
+// PCM: chi-square quantiles, maximum clique, consistent-loop selection.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <random>
+
+#include "hermes/server/pcm.h"
+
+namespace hermes {
+namespace server {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+TEST(Pcm, ChiSquareQuantiles) {
+  EXPECT_NEAR(chi2Quantile(0.95, 6), 12.5916, 1e-3);
+  EXPECT_NEAR(chi2Quantile(0.99, 6), 16.8119, 1e-3);
+  EXPECT_NEAR(chi2Quantile(0.95, 1), 3.8415, 1e-3);
+  EXPECT_NEAR(chi2Quantile(0.5, 2), 1.3863, 1e-3);
+  EXPECT_NEAR(chi2Quantile(0.999, 6), 22.4577, 1e-3);
+}
+
+int bruteForceCliqueSize(const std::vector<std::vector<char>>& adj) {
+  const int n = static_cast<int>(adj.size());
+  int best = 0;
+  for (std::uint32_t mask = 1; mask < (1u << n); ++mask) {
+    const int size = __builtin_popcount(mask);
+    if (size <= best) continue;
+    bool ok = true;
+    for (int i = 0; i < n && ok; ++i) {
+      if (!(mask >> i & 1)) continue;
+      for (int j = i + 1; j < n && ok; ++j) ok = !(mask >> j & 1) || adj[i][j];
+    }
+    if (ok) best = size;
+  }
+  return best;
+}
+
+bool isClique(const std::vector<std::vector<char>>& adj, const std::vector<int>& c) {
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    for (std::size_t j = i + 1; j < c.size(); ++j) {
+      if (!adj[c[i]][c[j]]) return false;
+    }
+  }
+  return true;
+}
+
+std::vector<std::vector<char>> randomGraph(int n, double p, std::mt19937& rng) {
+  std::bernoulli_distribution e(p);
+  std::vector<std::vector<char>> adj(n, std::vector<char>(n, 0));
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) adj[i][j] = adj[j][i] = e(rng);
+  }
+  return adj;
+}
+
+TEST(Pcm, ExactCliqueMatchesBruteForce) {
+  std::mt19937 rng(1);
+  for (int trial = 0; trial < 30; ++trial) {
+    const auto adj = randomGraph(14, 0.2 + 0.02 * trial, rng);
+    bool exact = false;
+    const auto c = maximumClique(adj, 40, &exact);
+    EXPECT_TRUE(exact);
+    EXPECT_TRUE(isClique(adj, c));
+    EXPECT_EQ(static_cast<int>(c.size()), bruteForceCliqueSize(adj)) << "trial " << trial;
+  }
+}
+
+TEST(Pcm, LargeGraphsExactAndGreedyFindPlantedClique) {
+  std::mt19937 rng(2);
+  for (int n : {40, 120}) {
+    auto adj = randomGraph(n, 0.3, rng);
+    // Plant a clique of 25 vertices.
+    std::vector<int> planted(n);
+    for (int i = 0; i < n; ++i) planted[i] = i;
+    std::shuffle(planted.begin(), planted.end(), rng);
+    planted.resize(25);
+    for (int a : planted) {
+      for (int b : planted) {
+        if (a != b) adj[a][b] = 1;
+      }
+    }
+    bool exact = false;
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto c = maximumClique(adj, 40, &exact);
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_EQ(exact, n <= 40);
+    EXPECT_TRUE(isClique(adj, c));
+    EXPECT_GE(c.size(), 25u) << "n " << n;
+    std::printf("n=%d %s clique %zu in %.2f ms\n", n, exact ? "exact" : "greedy", c.size(), ms);
+  }
+}
+
+Vec6 noise(std::mt19937& rng, double st, double sr) {
+  std::normal_distribution<double> n(0, 1);
+  Vec6 xi;
+  xi << st * n(rng), st * n(rng), st * n(rng), sr * n(rng), sr * n(rng), sr * n(rng);
+  return xi;
+}
+
+Mat6 diagCov(double st, double sr) {
+  Vec6 d;
+  d << Vec3::Constant(st * st), Vec3::Constant(sr * sr);
+  return d.asDiagonal();
+}
+
+/// Two agents' odometry (noisy, so their frames drift from the truth) and loops
+/// measured from the truth: true loops agree with the odometry up to drift.
+struct World {
+  std::map<KeyframeKey, SE3> truth;
+  std::vector<KeyframeKey> keys[2];
+  OdometryChain chain;
+};
+
+void makeWorld(World* w, std::mt19937& rng, int n) {
+  const double st = 0.01, sr = 0.2 * kDeg;
+  for (std::uint32_t a = 0; a < 2; ++a) {
+    SE3 T_A_K;
+    for (int i = 0; i < n; ++i) {
+      const double th = 2 * M_PI * i / n + a;
+      const KeyframeKey key{a, 1, static_cast<KeyframeId>(100 + 2 * i)};
+      w->truth[key] = SE3(expSO3(Vec3(0, 0, th + M_PI / 2)),
+                          Vec3(5 * std::cos(th) + 2.0 * a, 5 * std::sin(th), 0.2 * std::sin(2 * th)));
+      if (i > 0) {
+        const SE3 rel = w->truth.at(w->keys[a].back()).inverse() * w->truth.at(key);
+        T_A_K = T_A_K * rel * SE3::exp(noise(rng, st, sr));
+      } else {
+        T_A_K = w->truth.at(key);
+      }
+      ASSERT_TRUE(w->chain.addKeyframe(key, T_A_K).ok());
+      if (i > 0) {
+        ASSERT_TRUE(w->chain.addEdge(w->keys[a].back(), key, diagCov(st, sr).inverse()).ok());
+      }
+      w->keys[a].push_back(key);
+    }
+  }
+}
+
+TEST(Pcm, KeepsConsistentLoopsAndDropsFalseOnes) {
+  int false_accepted = 0, true_kept = 0, true_total = 0;
+  for (int seed = 1; seed <= 5; ++seed) {
+    std::mt19937 rng(seed);
+    World w;
+    makeWorld(&w, rng, 80);
+    std::vector<LoopCandidate> loops;
+    std::uniform_int_distribution<int> pick(0, 79);
+    const Mat6 loop_cov = diagCov(0.03, 0.5 * kDeg);
+    for (int k = 0; k < 10; ++k) {  // true inter-agent loops
+      const KeyframeKey a = w.keys[0][pick(rng)], b = w.keys[1][pick(rng)];
+      LoopCandidate l;
+      l.id = k;
+      // Alternate orientation to exercise the reversal.
+      l.a = k % 2 ? a : b;
+      l.b = k % 2 ? b : a;
+      l.T_a_b = w.truth.at(l.a).inverse() * w.truth.at(l.b) * SE3::exp(noise(rng, 0.03, 0.5 * kDeg));
+      l.covariance = loop_cov;
+      loops.push_back(l);
+    }
+    for (int k = 0; k < 5; ++k) {  // false loops: the right place, wrong pose
+      LoopCandidate l;
+      l.id = 100 + k;
+      l.a = w.keys[0][pick(rng)];
+      l.b = w.keys[1][pick(rng)];
+      std::uniform_real_distribution<double> u(-1, 1);
+      l.T_a_b = SE3(expSO3(Vec3(u(rng), u(rng), u(rng)) * 60 * kDeg), Vec3(u(rng), u(rng), u(rng)) * 4);
+      l.covariance = loop_cov;
+      loops.push_back(l);
+    }
+    const PcmResult r = selectConsistentLoops(loops, w.chain.query(), PcmParams());
+    EXPECT_EQ(r.groups, 1);
+    EXPECT_TRUE(r.all_exact);
+    EXPECT_EQ(r.odometry_failures, 0);
+    EXPECT_EQ(r.accepted.size() + r.rejected.size(), loops.size());
+    for (auto id : r.accepted) {
+      if (id >= 100) ++false_accepted; else ++true_kept;
+    }
+    true_total += 10;
+    std::printf("seed %d: accepted %zu rejected %zu in %.2f ms\n", seed, r.accepted.size(),
+                r.rejected.size(), r.time_ms);
+  }
+  EXPECT_EQ(false_accepted, 0);
+  EXPECT_GE(true_kept, 0.9 * true_total);
+}
+
+TEST(Pcm, IntraAgentLoopsAndMissingOdometry) {
+  std::mt19937 rng(4);
+  World w;
+  makeWorld(&w, rng, 60);
+  std::vector<LoopCandidate> loops;
+  for (int k = 0; k < 6; ++k) {
+    LoopCandidate l;
+    l.id = k;
+    l.a = w.keys[0][5 + k];
+    l.b = w.keys[0][50 + k];
+    l.T_a_b = w.truth.at(l.a).inverse() * w.truth.at(l.b) * SE3::exp(noise(rng, 0.02, 0.3 * kDeg));
+    l.covariance = diagCov(0.02, 0.3 * kDeg);
+    loops.push_back(l);
+  }
+  LoopCandidate bad = loops[0];
+  bad.id = 99;
+  bad.T_a_b = bad.T_a_b * SE3(expSO3(Vec3(0, 0, 0.5)), Vec3(1.5, 0, 0));
+  loops.push_back(bad);
+  PcmResult r = selectConsistentLoops(loops, w.chain.query(), PcmParams());
+  EXPECT_EQ(r.accepted.size(), 6u);
+  ASSERT_EQ(r.rejected.size(), 1u);
+  EXPECT_EQ(r.rejected[0], 99u);
+
+  // A loop to an unknown trajectory has no odometry: it cannot be verified.
+  OdometryChain empty;
+  r = selectConsistentLoops(loops, empty.query(), PcmParams{0.99, 40, 2});
+  EXPECT_TRUE(r.accepted.empty());
+  EXPECT_GT(r.odometry_failures, 0);
+}
+
+TEST(Pcm, OdometryChainComposesCovariance) {
+  OdometryChain chain;
+  const KeyframeKey k0{0, 0, 1}, k1{0, 0, 2}, k2{0, 0, 3};
+  ASSERT_TRUE(chain.addKeyframe(k0, SE3()).ok());
+  ASSERT_TRUE(chain.addKeyframe(k1, SE3(expSO3(Vec3(0, 0, 0.3)), Vec3(1, 0, 0))).ok());
+  ASSERT_TRUE(chain.addKeyframe(k2, SE3(expSO3(Vec3(0, 0, 0.6)), Vec3(2, 0.3, 0))).ok());
+  const Mat6 c = diagCov(0.1, 0.01);
+  ASSERT_TRUE(chain.addEdge(k0, k1, c.inverse()).ok());
+  EXPECT_FALSE(chain.addEdge(k0, k2, c.inverse()).ok());  // not consecutive
+  EXPECT_FALSE(chain.relative(k0, k2).ok());              // edge k1->k2 missing
+  ASSERT_TRUE(chain.addEdge(k1, k2, c.inverse()).ok());
+  auto r = chain.relative(k0, k2);
+  ASSERT_TRUE(r.ok());
+  // Monte Carlo check of the propagated covariance of T_k0_k2.
+  std::mt19937 rng(9);
+  const SE3 E0 = SE3().inverse() * SE3(expSO3(Vec3(0, 0, 0.3)), Vec3(1, 0, 0));
+  const SE3 E1 = SE3(expSO3(Vec3(0, 0, 0.3)), Vec3(1, 0, 0)).inverse() *
+                 SE3(expSO3(Vec3(0, 0, 0.6)), Vec3(2, 0.3, 0));
+  Mat6 mc = Mat6::Zero();
+  const int N = 20000;
+  for (int i = 0; i < N; ++i) {
+    const SE3 T = E0 * SE3::exp(noise(rng, 0.1, 0.01)) * E1 * SE3::exp(noise(rng, 0.1, 0.01));
+    const Vec6 xi = (r->T.inverse() * T).log();
+    mc += xi * xi.transpose() / N;
+  }
+  EXPECT_LT((mc - r->covariance).norm(), 0.05 * r->covariance.norm());
+  auto back = chain.relative(k2, k0);
+  ASSERT_TRUE(back.ok());
+  EXPECT_LT((back->T * r->T).log().norm(), 1e-12);
+}
+
+}  // namespace
+}  // namespace server
+}  // namespace hermes
