@@ -39,9 +39,10 @@ void ByteModel::refit() {
     b += x * s[4];
     scale += x.cwiseAbs2();
   }
-  const double mu = 0.05;
+  // The prior weighs like one average sample per coefficient.
+  const double n = static_cast<double>(std::max<std::size_t>(1, samples_.size()));
   for (int k = 0; k < 4; ++k) {
-    const double w = mu * std::max(scale[k], 1.0);
+    const double w = std::max(scale[k] / n, 1.0);
     A(k, k) += w;
     b[k] += w * prior_[static_cast<std::size_t>(k)];
   }
@@ -79,33 +80,40 @@ CoordinatorPlan planDistillation(const Submap& w, double budget, const ByteModel
                                  const DistillParams& params) {
   CoordinatorPlan plan;
   const int n = static_cast<int>(w.keyframes.size());
-  const int n_max = std::min(n, params.max_keyframes);
   const int n_min = keyframeFloor(w, params);
-  const double mean_per_kf =
-      n > 0 ? static_cast<double>(w.observationCount()) / n : 0.0;
-  double best = -1;
-  for (int nk = std::max(n_min, 1); nk <= std::max(n_max, n_min); ++nk) {
-    for (int k = params.k_min; k <= params.k_max; ++k) {
-      double lm, obs;
-      predictKept(w, nk, k, &lm, &obs);
-      const double bytes = model.predict(nk, obs, lm);
-      if (bytes > budget) continue;
-      const double utility = std::sqrt(static_cast<double>(nk)) * std::min<double>(k, mean_per_kf) + 1e-6 * k;
-      if (utility > best) {
-        best = utility;
-        plan.n_kf = nk;
-        plan.k = k;
-        plan.predicted_bytes = bytes;
-      }
-    }
+  const int n_max = std::max(n_min, std::min(n, params.max_keyframes));
+  const int k_pref = std::clamp(params.k_pref, params.k_min, params.k_max);
+  auto bytes = [&](int nk, int k) {
+    double lm, obs;
+    predictKept(w, nk, k, &lm, &obs);
+    return model.predict(nk, obs, lm);
+  };
+  auto largestK = [&](int nk, int lo, int hi) {  // largest fitting K in [lo, hi], or -1
+    for (int k = hi; k >= lo; --k)
+      if (bytes(nk, k) <= budget) return k;
+    return -1;
+  };
+  // 1) The most keyframes that still carry the preferred K; then the largest K.
+  for (int nk = n_max; nk >= n_min; --nk) {
+    if (bytes(nk, k_pref) > budget) continue;
+    plan.n_kf = nk;
+    plan.k = largestK(nk, k_pref, params.k_max);
+    plan.predicted_bytes = bytes(nk, plan.k);
+    return plan;
   }
-  if (best < 0) {
-    plan.defer = true;
-    std::ostringstream why;
-    why << "budget " << budget << " B is below the floor (" << n_min << " keyframes, K = "
-        << params.k_min << ")";
-    plan.reason = why.str();
+  // 2) At the keyframe floor, the largest K down to k_min.
+  const int k = largestK(n_min, params.k_min, k_pref - 1);
+  if (k > 0 && n_min > 0) {
+    plan.n_kf = n_min;
+    plan.k = k;
+    plan.predicted_bytes = bytes(n_min, k);
+    return plan;
   }
+  plan.defer = true;
+  std::ostringstream why;
+  why << "budget " << budget << " B is below the floor (" << n_min << " keyframes, K = "
+      << params.k_min << ": " << bytes(std::max(n_min, 1), params.k_min) << " B predicted)";
+  plan.reason = why.str();
   return plan;
 }
 

@@ -14,6 +14,8 @@ namespace distill {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+// A fitting selection below this fraction of the budget triggers a larger K.
+constexpr double kFillTarget = 0.8;
 double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -131,6 +133,9 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   double s_lm = budgeted ? rep.budget_bytes - model_.c0() - model_.cKf() * n_kept
                          : std::numeric_limits<double>::infinity();
   Submap out;
+  bool have_fit = false;
+  Submap fit;
+  DistillReport fit_report;
   for (int round = 1; round <= params_.max_rounds; ++round) {
     rep.rounds = round;
     rep.k = k;
@@ -146,13 +151,33 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     rep.grid_slack = sel.grid_slack;
     out = keepLandmarks(trimmed, sel.selected, false);
     const double bytes = measure(out);
-    if (!budgeted || bytes <= rep.budget_bytes) return finish(std::move(out));
+    if (!budgeted) return finish(std::move(out));
+    if (bytes <= rep.budget_bytes) {
+      have_fit = true;
+      fit = std::move(out);
+      fit_report = rep;
+      // Fits. If the byte model was pessimistic and K can grow, try a larger K.
+      if (bytes >= kFillTarget * rep.budget_bytes || k >= params_.k_max) break;
+      k = std::min(params_.k_max,
+                   static_cast<int>(std::ceil(k * std::min(2.0, rep.budget_bytes / bytes))));
+      continue;
+    }
+    if (have_fit) break;  // a grown K overshot: keep the last fitting selection
     // Too large: shrink K and the landmark budget by the overshoot ratio.
     const double ratio = rep.budget_bytes / bytes;
     const int next_k = static_cast<int>(std::floor(k * ratio * 0.95));
     s_lm = s_lm - (bytes - rep.budget_bytes) * 1.05;
     if (next_k < params_.k_min || s_lm < 0) break;
     k = next_k;
+  }
+  if (have_fit) {
+    const int rounds = rep.rounds;
+    const double t_sel = rep.time_select_ms, t_enc = rep.time_encode_ms;
+    rep = fit_report;
+    rep.rounds = rounds;
+    rep.time_select_ms = t_sel;
+    rep.time_encode_ms = t_enc;
+    return finish(std::move(fit));
   }
   rep.over_budget = true;
   rep.deferred = true;

@@ -43,6 +43,7 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("probe_gain", probe_gain)
   HERMES_READ("k_max", k_max)
   HERMES_READ("k_min", k_min)
+  HERMES_READ("k_pref", k_pref)
   HERMES_READ("min_keyframe_rate_hz", min_keyframe_rate_hz)
   HERMES_READ("max_rounds", max_rounds)
   HERMES_READ("max_keyframes", max_keyframes)
@@ -60,6 +61,7 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("grid_cols", grid_cols)
   HERMES_READ("grid_rows", grid_rows)
   HERMES_READ("milp_time_limit_s", milp_time_limit_s)
+  HERMES_READ("milp_rel_gap", milp_rel_gap)
   HERMES_READ_BOOL("milp_warm_start", milp_warm_start)
   HERMES_READ("trim_w_rot", trim_w_rot)
   HERMES_READ("trim_w_trans", trim_w_trans)
@@ -98,6 +100,7 @@ Status DistillParams::validate() const {
   if (!(epsilon > 0)) return bad("epsilon must be > 0");
   if (lambda_support < 0 || lambda_grid < 0) return bad("lambdas must be >= 0");
   if (grid_cols < 1 || grid_rows < 1) return bad("grid_cols/grid_rows must be >= 1");
+  if (milp_rel_gap < 0 || milp_rel_gap >= 1) return bad("milp_rel_gap must be in [0, 1)");
   if (!(milp_time_limit_s > 0) || !(trim_time_limit_s > 0)) return bad("time limits must be > 0");
   if (trim_w_rot < 0 || trim_w_trans < 0) return bad("trim weights must be >= 0");
   if (trim_lambda < 0 || trim_min_shared < 1) return bad("trim_lambda >= 0, trim_min_shared >= 1");
@@ -118,6 +121,7 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "probe_gain", probe_gain);
   out->set(p + "k_max", k_max);
   out->set(p + "k_min", k_min);
+  out->set(p + "k_pref", k_pref);
   out->set(p + "min_keyframe_rate_hz", min_keyframe_rate_hz);
   out->set(p + "max_rounds", max_rounds);
   out->set(p + "max_keyframes", max_keyframes);
@@ -135,6 +139,7 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "grid_cols", grid_cols);
   out->set(p + "grid_rows", grid_rows);
   out->set(p + "milp_time_limit_s", milp_time_limit_s);
+  out->set(p + "milp_rel_gap", milp_rel_gap);
   out->set(p + "milp_warm_start", milp_warm_start);
   out->set(p + "trim_w_rot", trim_w_rot);
   out->set(p + "trim_w_trans", trim_w_trans);

@@ -106,7 +106,10 @@ void finaliseResult(const SelectionProblem& p, SelectionResult* r) {
   for (int i : r->selected) r->bytes += p.bytes[static_cast<std::size_t>(i)];
 }
 
-std::vector<int> greedyEq14(const SelectionProblem& p) {
+namespace {
+
+// One lazy greedy pass: by gain per byte (per_byte) or by absolute gain.
+std::vector<int> greedyPass(const SelectionProblem& p, bool per_byte) {
   const std::size_t n = p.cost.size();
   std::vector<int> selected;
   if (!(p.budget >= 0)) return selected;
@@ -130,7 +133,7 @@ std::vector<int> greedyEq14(const SelectionProblem& p) {
   std::priority_queue<Entry> heap;
   for (std::size_t i = 0; i < n; ++i) {
     const double g = gain(i);
-    if (g > 0) heap.emplace(g / std::max(p.bytes[i], 1e-9), static_cast<int>(i));
+    if (g > 0) heap.emplace(per_byte ? g / std::max(p.bytes[i], 1e-9) : g, static_cast<int>(i));
   }
   double used = 0;
   std::vector<char> taken(n, 0);
@@ -141,7 +144,7 @@ std::vector<int> greedyEq14(const SelectionProblem& p) {
     if (taken[i] || used + p.bytes[i] > p.budget) continue;
     const double g = gain(i);
     if (g <= 0) continue;
-    const double r = g / std::max(p.bytes[i], 1e-9);
+    const double r = per_byte ? g / std::max(p.bytes[i], 1e-9) : g;
     if (!heap.empty() && r < heap.top().first - 1e-12) {
       heap.emplace(r, idx);
       continue;
@@ -154,6 +157,15 @@ std::vector<int> greedyEq14(const SelectionProblem& p) {
   }
   std::sort(selected.begin(), selected.end());
   return selected;
+}
+
+}  // namespace
+
+std::vector<int> greedyEq14(const SelectionProblem& p) {
+  // The better of the two classic knapsack greedy orders.
+  std::vector<int> a = greedyPass(p, true);
+  std::vector<int> b = greedyPass(p, false);
+  return evaluateObjective(p, b) < evaluateObjective(p, a) ? b : a;
 }
 
 }  // namespace distill

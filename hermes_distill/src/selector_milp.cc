@@ -7,6 +7,7 @@
 #include <memory>
 
 #include <CbcModel.hpp>
+#include <CbcStrategy.hpp>
 #include <CoinPackedMatrix.hpp>
 #include <CoinPackedVector.hpp>
 #include <OsiClpSolverInterface.hpp>
@@ -16,8 +17,8 @@
 namespace hermes {
 namespace distill {
 
-MilpSelector::MilpSelector(double time_limit_s, bool warm_start)
-    : time_limit_s_(time_limit_s), warm_start_(warm_start) {}
+MilpSelector::MilpSelector(double time_limit_s, bool warm_start, double rel_gap)
+    : time_limit_s_(time_limit_s), warm_start_(warm_start), rel_gap_(rel_gap) {}
 
 SelectionResult MilpSelector::select(const SelectionProblem& p) const {
   const auto t0 = std::chrono::steady_clock::now();
@@ -90,7 +91,9 @@ SelectionResult MilpSelector::select(const SelectionProblem& p) const {
   model->setUseElapsedTime(true);
   model->setMaximumSeconds(std::max(1e-4, time_limit_s_));
   model->setAllowableGap(1e-7);
-  model->setAllowableFractionGap(0.0);
+  model->setAllowableFractionGap(rel_gap_);
+  CbcStrategyDefault strategy(1, 5, 0, 0);  // root cuts + default heuristics, no preprocessing
+  model->setStrategy(strategy);
 
   if (warm_start_) {
     std::vector<double> start(static_cast<std::size_t>(ncols), 0.0);

@@ -164,7 +164,8 @@ Expected<std::unique_ptr<LandmarkSelector>> makeLandmarkSelector(const std::stri
                                                                  const DistillParams& params) {
   std::unique_ptr<LandmarkSelector> s;
   if (strategy == "milp") {
-    s = std::make_unique<MilpSelector>(params.milp_time_limit_s, params.milp_warm_start);
+    s = std::make_unique<MilpSelector>(params.milp_time_limit_s, params.milp_warm_start,
+                                       params.milp_rel_gap);
   } else if (strategy == "greedy_logdet") {
     s = std::make_unique<GreedyLogDetSelector>();
   } else if (strategy == "stability") {

@@ -62,10 +62,10 @@ int keyframeFloor(const Submap& window, const DistillParams& params);
 /// N keyframes with K landmarks each, from the window's track statistics.
 void predictKept(const Submap& window, int n_kf, int k, double* landmarks, double* observations);
 
-/// Chooses (N_KF, K) in [floor, min(max_keyframes, n)] × [k_min, k_max] whose
-/// predicted size fits `budget`, maximising sqrt(N_KF)·min(K, mean n_j) (extra
-/// keyframes are worth less than landmarks per keyframe; ties -> larger K).
-/// Defers when nothing at or above the floor fits.
+/// Chooses (N_KF, K) by predicted size: the most keyframes in [floor,
+/// min(max_keyframes, n)] that still fit with K = k_pref, then the largest K up
+/// to k_max at that N_KF; if even the floor cannot carry k_pref, the floor with
+/// the largest K down to k_min. Defers when nothing at or above the floor fits.
 CoordinatorPlan planDistillation(const Submap& window, double budget, const ByteModel& model,
                                  const DistillParams& params);
 

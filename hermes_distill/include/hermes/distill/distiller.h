@@ -8,7 +8,9 @@
 //  * coordinator off: N_KF = max_keyframes, K = fixed_k, no byte budget.
 //  * coordinator on: S from Eq. 17, (N_KF, K) from the byte model, the selector's
 //    hard budget S_LM = S − c0 − c_KF·N_kept; if the real encoded size exceeds S,
-//    K and S_LM shrink by the overshoot ratio and the selection reruns.
+//    K and S_LM shrink by the overshoot ratio and the selection reruns; if it
+//    fits below 80 % of S and K < k_max, K grows by S/size (at most ×2) and the
+//    larger selection is kept if it still fits. At most max_rounds selections.
 #pragma once
 
 #include <cstddef>

@@ -79,7 +79,8 @@ struct SelectionResult {
 double evaluateObjective(const SelectionProblem& p, const std::vector<int>& selected,
                          double* support_slack = nullptr, double* grid_slack = nullptr);
 
-/// Lazy greedy on Eq. 14 (largest objective decrease per byte that fits).
+/// Lazy greedy on Eq. 14: the better of two passes, by objective decrease per
+/// byte and by absolute decrease, adding what fits while the decrease is positive.
 std::vector<int> greedyEq14(const SelectionProblem& p);
 
 class LandmarkSelector {

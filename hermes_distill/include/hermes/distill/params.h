@@ -17,6 +17,7 @@
 //   distill.lambda_grid       λ₂ (per uncovered occupied image cell)
 //   distill.grid_cols, distill.grid_rows   image grid of the coverage constraint
 //   distill.milp_time_limit_s CBC time limit [s]
+//   distill.milp_rel_gap      relative optimality gap at which CBC stops (0 = exact)
 //   distill.milp_warm_start   warm start CBC from the greedy solution [bool]
 //   distill.alpha, distill.beta   fixed score weights (used when adaptive_weights off)
 //   distill.adaptive_weights  α grows with loop closures, β with inter-KF rotation [bool]
@@ -30,6 +31,7 @@
 //   distill.trim_time_limit_s CBC time limit of the trimming MILP [s]
 //   distill.max_keyframes     N_KF when the coordinator is off
 //   distill.k_max, distill.k_min   range of K the coordinator may choose
+//   distill.k_pref            K the coordinator keeps before it drops keyframes
 //   distill.min_keyframe_rate_hz   floor: fewer kept keyframes per second -> defer
 //   distill.max_rounds        encode/shrink rounds (<= 3)
 //   distill.odom_sigma_trans, distill.odom_sigma_rot  odometry prior [m], [rad]
@@ -56,6 +58,7 @@ struct DistillParams {
   double probe_gain = 0.25;
   int k_max = 150;
   int k_min = 15;
+  int k_pref = 60;
   double min_keyframe_rate_hz = 0.4;
   int max_rounds = 3;
   int max_keyframes = 12;
@@ -77,6 +80,7 @@ struct DistillParams {
   int grid_cols = 6;
   int grid_rows = 4;
   double milp_time_limit_s = 0.1;
+  double milp_rel_gap = 1e-3;
   bool milp_warm_start = true;
 
   // Keyframe trimming (Eq. 15-16).

@@ -9,13 +9,16 @@ namespace distill {
 /// Eq. 14 with CBC; status optimal / time_limited / greedy_fallback / infeasible_relaxed.
 class MilpSelector : public LandmarkSelector {
  public:
-  MilpSelector(double time_limit_s, bool warm_start);
+  /// rel_gap: CBC stops once (incumbent − bound) <= rel_gap·|incumbent|; the
+  /// result then counts as optimal (within that gap). 0 = prove exact optimality.
+  MilpSelector(double time_limit_s, bool warm_start, double rel_gap = 0.0);
   std::string name() const override { return "milp"; }
   SelectionResult select(const SelectionProblem& problem) const override;
 
  private:
   double time_limit_s_;
   bool warm_start_;
+  double rel_gap_;
 };
 
 /// Lazy greedy on f(S) = log det(δI + Σ Λ_l), by gain per byte, within the budget;
