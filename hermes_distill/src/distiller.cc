@@ -134,14 +134,19 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
                          : std::numeric_limits<double>::infinity();
   Submap out;
   bool have_fit = false;
+  bool floor_hit = false;
+  std::vector<int> last_selected;
+  double last_bytes = 0;
   Submap fit;
   DistillReport fit_report;
   for (int round = 1; round <= params_.max_rounds; ++round) {
     rep.rounds = round;
     rep.k = k;
     t0 = Clock::now();
-    const SelectionProblem prob =
+    SelectionProblem prob =
         buildSelectionProblem(trimmed, scores, k, s_lm, model_.cLm(), model_.cObs(), params_);
+    // All rounds together get the MILP time limit (each at least 10 ms).
+    prob.time_limit_s = std::max(0.01, params_.milp_time_limit_s - rep.time_select_ms * 1e-3);
     const SelectionResult sel = selector_->select(prob);
     rep.time_select_ms += msSince(t0);
     rep.selection_status = toString(sel.status);
@@ -150,7 +155,9 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     rep.support_slack = sel.support_slack;
     rep.grid_slack = sel.grid_slack;
     out = keepLandmarks(trimmed, sel.selected, false);
+    last_selected = sel.selected;
     const double bytes = measure(out);
+    last_bytes = bytes;
     if (!budgeted) return finish(std::move(out));
     if (bytes <= rep.budget_bytes) {
       have_fit = true;
@@ -167,7 +174,10 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     const double ratio = rep.budget_bytes / bytes;
     const int next_k = static_cast<int>(std::floor(k * ratio * 0.95));
     s_lm = s_lm - (bytes - rep.budget_bytes) * 1.05;
-    if (next_k < params_.k_min || s_lm < 0) break;
+    if (next_k < params_.k_min || s_lm < 0) {
+      floor_hit = true;  // the floor is reached: defer rather than degrade further
+      break;
+    }
     k = next_k;
   }
   if (have_fit) {
@@ -178,6 +188,37 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     rep.time_select_ms = t_sel;
     rep.time_encode_ms = t_enc;
     return finish(std::move(fit));
+  }
+  // Repair: the rounds missed (byte model off, or CBC cut short). Drop the least
+  // valuable kept landmarks, sized by the real bytes per modelled byte, until the
+  // encoded size fits; a few encodings at most.
+  for (int attempt = 0; attempt < 3 && !floor_hit && !last_selected.empty(); ++attempt) {
+    const double predicted = model_.predict(static_cast<double>(out.keyframes.size()),
+                                            static_cast<double>(out.observationCount()),
+                                            static_cast<double>(out.landmarks.size()));
+    const double real_per_model = last_bytes / std::max(predicted, 1.0);
+    std::vector<int> order = last_selected;
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+      return scores.value[static_cast<std::size_t>(a)] < scores.value[static_cast<std::size_t>(b)];
+    });
+    const double need = (last_bytes - rep.budget_bytes) * 1.05;
+    double saved = 0;
+    std::size_t drop = 0;
+    while (drop < order.size() && saved < need) {
+      const Landmark& lm = trimmed.landmarks[static_cast<std::size_t>(order[drop])];
+      saved += real_per_model *
+               (model_.cLm() + model_.cObs() * static_cast<double>(lm.observations.size()));
+      ++drop;
+    }
+    if (drop >= order.size()) break;
+    last_selected.assign(order.begin() + static_cast<std::ptrdiff_t>(drop), order.end());
+    std::sort(last_selected.begin(), last_selected.end());
+    out = keepLandmarks(trimmed, last_selected, false);
+    last_bytes = measure(out);
+    if (last_bytes <= rep.budget_bytes) {
+      rep.selection_status += "+repaired";
+      return finish(std::move(out));
+    }
   }
   rep.over_budget = true;
   rep.deferred = true;

@@ -89,7 +89,7 @@ SelectionResult MilpSelector::select(const SelectionProblem& p) const {
   model->messageHandler()->setLogLevel(0);
   model->solver()->messageHandler()->setLogLevel(0);
   model->setUseElapsedTime(true);
-  model->setMaximumSeconds(std::max(1e-4, time_limit_s_));
+  model->setMaximumSeconds(std::max(1e-4, p.time_limit_s > 0 ? p.time_limit_s : time_limit_s_));
   model->setAllowableGap(1e-7);
   model->setAllowableFractionGap(rel_gap_);
   CbcStrategyDefault strategy(1, 5, 0, 0);  // root cuts + default heuristics, no preprocessing
@@ -114,6 +114,7 @@ SelectionResult MilpSelector::select(const SelectionProblem& p) const {
   model->branchAndBound();
 
   const double* best = model->bestSolution();
+  r.lower_bound = model->getBestPossibleObjValue();
   std::vector<int> chosen;
   bool usable = best != nullptr;
   if (usable) {

@@ -93,6 +93,25 @@ TEST(Coordinator, ReselectsWhenTheByteModelUnderestimates) {
   EXPECT_LE(static_cast<double>(r2.report.bytes_actual), r2.report.budget_bytes);
 }
 
+TEST(Coordinator, RepairsWhenTheRoundsRunOut) {
+  const SyntheticWindow w = testing::window("MH_01_easy", 140.0);
+  DistillParams p;
+  p.max_rounds = 1;
+  p.bytes_obs = 30;  // real: ~65 B per observation, so the single round overshoots
+  p.bytes_lm = 30;
+  Distiller d(p, referenceEncodedSize);
+  CoordinatorInput in;
+  in.bandwidth_Bps = 0.08 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);
+  const DistillResult r = d.distill(w.submap, w.hint, in);
+  ASSERT_FALSE(r.report.deferred) << r.report.defer_reason;
+  EXPECT_NE(r.report.selection_status.find("+repaired"), std::string::npos)
+      << r.report.selection_status << " k=" << r.report.k << " bytes=" << r.report.bytes_actual
+      << " budget=" << r.report.budget_bytes;
+  EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes);
+  EXPECT_EQ(r.report.bytes_actual, referenceEncodedSize(r.submap));
+  EXPECT_EQ(r.submap.validate(), "");
+}
+
 TEST(Coordinator, DefersBelowTheFloor) {
   const SyntheticWindow w = testing::window("MH_01_easy", 90.0);
   DistillParams p;

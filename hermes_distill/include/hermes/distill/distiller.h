@@ -10,7 +10,9 @@
 //    hard budget S_LM = S − c0 − c_KF·N_kept; if the real encoded size exceeds S,
 //    K and S_LM shrink by the overshoot ratio and the selection reruns; if it
 //    fits below 80 % of S and K < k_max, K grows by S/size (at most ×2) and the
-//    larger selection is kept if it still fits. At most max_rounds selections.
+//    larger selection is kept if it still fits. At most max_rounds selections;
+//    if none fits, the least valuable landmarks are dropped until the real size
+//    fits (status suffix "+repaired"); only if that fails is the window deferred.
 #pragma once
 
 #include <cstddef>
@@ -38,7 +40,7 @@ struct DistillReport {
   bool deferred = false;       ///< keep the window in the buffer, send later
   std::string defer_reason;
   std::string strategy;
-  std::string selection_status;  ///< toString(SolveStatus) of the last round
+  std::string selection_status;  ///< toString(SolveStatus) of the kept round (+"+repaired")
   std::string trim_status;
   int n_kf_in = 0, n_kf = 0;
   int n_lm_in = 0, n_lm = 0;

@@ -37,6 +37,7 @@ struct SelectionProblem {
   std::vector<std::vector<int>> cell_members;  ///< landmarks in occupied cell g
   double lambda_support = 2.0, lambda_grid = 1.5;
   int k = 0;
+  double time_limit_s = 0;  ///< > 0 overrides the MILP selector's own time limit
   // Data the heuristic strategies use.
   std::vector<double> q_s;
   std::vector<double> value;
@@ -73,6 +74,7 @@ struct SelectionResult {
   double bytes = 0;                        ///< Σ b_i of `selected`
   double solve_time_s = 0;
   double greedy_objective = 0;             ///< milp only: objective of its warm start
+  double lower_bound = 0;                  ///< milp only: CBC's proven lower bound
 };
 
 /// Evaluates Eq. 14 for a selection (slacks at their optimal values).

@@ -16,7 +16,7 @@
 //   distill.lambda_support    λ₁ (per missing landmark of a keyframe's support)
 //   distill.lambda_grid       λ₂ (per uncovered occupied image cell)
 //   distill.grid_cols, distill.grid_rows   image grid of the coverage constraint
-//   distill.milp_time_limit_s CBC time limit [s]
+//   distill.milp_time_limit_s CBC time limit per window, shared by its rounds [s]
 //   distill.milp_rel_gap      relative optimality gap at which CBC stops (0 = exact)
 //   distill.milp_warm_start   warm start CBC from the greedy solution [bool]
 //   distill.alpha, distill.beta   fixed score weights (used when adaptive_weights off)
