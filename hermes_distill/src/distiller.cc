@@ -48,7 +48,16 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   rep.strategy = params_.strategy;
   rep.n_kf_in = static_cast<int>(window.keyframes.size());
   rep.n_lm_in = static_cast<int>(window.landmarks.size());
-  const std::string problem = window.validate();
+  std::string problem = window.validate();
+  for (const Keyframe& kf : window.keyframes) {
+    if (!problem.empty()) break;
+    if (!kf.T_A_C.translation().allFinite() || !kf.T_A_C.quat().coeffs().allFinite())
+      problem = "keyframe " + std::to_string(kf.id) + " has a non-finite pose";
+  }
+  if (hint.valid && (!hint.T_A_C.translation().allFinite() ||
+                     !hint.T_Cprev_Ccurr.translation().allFinite() ||
+                     !hint.T_Cprev_Ccurr.quat().coeffs().allFinite() || !(hint.dt_s > 0)))
+    problem = problem.empty() ? "motion hint is not finite or has dt <= 0" : problem;
   if (!problem.empty()) {
     rep.ok = false;
     rep.error = "distill: malformed window (seq " + std::to_string(window.header.seq) + "): " + problem;

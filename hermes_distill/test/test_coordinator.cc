@@ -192,6 +192,43 @@ TEST(Coordinator, MalformedWindowIsAnErrorNotACrash) {
   EXPECT_NE(r.report.error.find("987654321"), std::string::npos);
 }
 
+TEST(Coordinator, DegenerateWindowsDoNotBreakAnyStrategy) {
+  const SyntheticWindow w = testing::window("V1_01_easy", 110.0);
+  Submap one = w.submap;  // a single keyframe
+  one.keyframes.resize(1);
+  for (auto& lm : one.landmarks) {
+    std::vector<Observation> keep;
+    for (const auto& ob : lm.observations)
+      if (ob.keyframe == one.keyframes[0].id) keep.push_back(ob);
+    lm.observations = keep;
+  }
+  Submap no_landmarks = w.submap;
+  no_landmarks.landmarks.clear();
+  for (auto& kf : no_landmarks.keyframes)
+    std::fill(kf.keypoint_landmark.begin(), kf.keypoint_landmark.end(), kInvalidId);
+  Submap empty;
+  empty.cameras = w.submap.cameras;
+  Submap bad_pose = w.submap;
+  bad_pose.keyframes[2].T_A_C = SE3(Quat::Identity(), Vec3(NAN, 0, 0));
+  for (const std::string s : {"milp", "greedy_logdet", "stability", "anms", "none"}) {
+    DistillParams p;
+    p.strategy = s;
+    Distiller d(p, referenceEncodedSize);
+    CoordinatorInput in;
+    in.bandwidth_Bps = 50000;
+    for (const Submap* sm : {&one, &no_landmarks, &empty}) {
+      const DistillResult r = d.distill(*sm, w.hint, in);
+      EXPECT_TRUE(r.report.ok) << s << ": " << r.report.error;
+      if (!r.report.deferred) {
+        EXPECT_EQ(r.submap.validate(), "") << s;
+      }
+    }
+    const DistillResult r = d.distill(bad_pose, w.hint, in);
+    EXPECT_FALSE(r.report.ok) << s;
+    EXPECT_NE(r.report.error.find("non-finite pose"), std::string::npos) << r.report.error;
+  }
+}
+
 TEST(Params, ReadsTheDistillSection) {
   auto cfg = Config::fromString(
       "distill:\n  strategy: greedy_logdet\n  coordinator: off\n  fixed_k: 40\n  eta: 0.7\n", "test.yaml");

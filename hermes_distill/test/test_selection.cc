@@ -69,7 +69,9 @@ TEST(Selection, ConstraintsHoldOrTheirSlackIsReported) {
       EXPECT_NEAR(r.support_slack, xi, 1e-9) << s;
       EXPECT_NEAR(r.grid_slack, phi, 1e-9) << s;
       EXPECT_NEAR(r.bytes, bytes, 1e-6) << s;
-      if (s != "none") EXPECT_LE(bytes, p.budget + 1e-9) << s << " trial " << trial;
+      if (s != "none") {
+        EXPECT_LE(bytes, p.budget + 1e-9) << s << " trial " << trial;
+      }
     }
   }
 }
@@ -146,7 +148,9 @@ TEST(Selection, TimeLimitReturnsGreedyOrBetterWithItsStatus) {
         << toString(r.status);
     EXPECT_LE(r.bytes, p.budget);
     EXPECT_LE(r.objective, greedy_obj + 1e-9);
-    if (r.status == SolveStatus::kGreedyFallback) EXPECT_EQ(r.selected, greedy);
+    if (r.status == SolveStatus::kGreedyFallback) {
+      EXPECT_EQ(r.selected, greedy);
+    }
   }
 }
 
