@@ -13,7 +13,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -50,10 +52,16 @@ json stats(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string json_out, data_dir = "/work/shared/data";
-#ifdef HERMES_SHARED_DATA_DIR
-  data_dir = HERMES_SHARED_DATA_DIR;
-#endif
+  // Data: --data, else $HERMES_SHARED_DATA_DIR, else shared/data beside the
+  // repository that holds this executable (<repo>/<build>/bin/..), else /work/shared/data.
+  std::string json_out, data_dir;
+  if (const char* env = std::getenv("HERMES_SHARED_DATA_DIR")) data_dir = env;
+  if (data_dir.empty()) {
+    std::error_code ec;
+    const auto exe = std::filesystem::canonical("/proc/self/exe", ec);
+    const auto beside = exe.parent_path().parent_path().parent_path().parent_path() / "shared" / "data";
+    data_dir = !ec && std::filesystem::exists(beside / "euroc_gt") ? beside.string() : "/work/shared/data";
+  }
   int windows = 10;
   std::uint64_t seed = 7;
   for (int i = 1; i < argc; ++i) {
