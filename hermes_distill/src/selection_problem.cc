@@ -45,6 +45,7 @@ SelectionProblem buildSelectionProblem(const Submap& window, const LandmarkScore
   std::vector<std::map<int, std::vector<int>>> cells(window.keyframes.size());
   for (std::size_t i = 0; i < n; ++i) {
     const Landmark& lm = window.landmarks[i];
+    p.ids.push_back(lm.id);
     p.cost[i] = 1.0 + params.epsilon - scores.value[i];
     int obs = 0;
     for (const Observation& ob : lm.observations) {
@@ -103,7 +104,11 @@ void finaliseResult(const SelectionProblem& p, SelectionResult* r) {
   std::sort(r->selected.begin(), r->selected.end());
   r->objective = evaluateObjective(p, r->selected, &r->support_slack, &r->grid_slack);
   r->bytes = 0;
-  for (int i : r->selected) r->bytes += p.bytes[static_cast<std::size_t>(i)];
+  r->selected_ids.clear();
+  for (int i : r->selected) {
+    r->bytes += p.bytes[static_cast<std::size_t>(i)];
+    if (static_cast<std::size_t>(i) < p.ids.size()) r->selected_ids.push_back(p.ids[static_cast<std::size_t>(i)]);
+  }
 }
 
 namespace {

@@ -124,6 +124,9 @@ TEST(Selection, MilpImprovesOnGreedyOnARealWindow) {
   p.budget = 0.4 * all;
   const SelectionResult r = MilpSelector(2.0, true).select(p);
   EXPECT_EQ(r.status, SolveStatus::kOptimal);
+  ASSERT_EQ(r.selected_ids.size(), r.selected.size());
+  for (std::size_t k = 0; k < r.selected.size(); ++k)
+    EXPECT_EQ(r.selected_ids[k], w.submap.landmarks[static_cast<std::size_t>(r.selected[k])].id);
   EXPECT_LE(r.objective, r.greedy_objective + 1e-9);
   EXPECT_NEAR(r.greedy_objective, evaluateObjective(p, greedyEq14(p)), 1e-9);
   // Every heuristic is feasible for Eq. 14, so none beats the optimum.

@@ -29,6 +29,7 @@ namespace distill {
 
 /// One instance of Eq. 14; landmark i is the i-th landmark of the submap it was built from.
 struct SelectionProblem {
+  std::vector<LandmarkId> ids;              ///< landmark ids (empty for synthetic instances)
   std::vector<double> cost;                 ///< 1 + ε − v_i
   std::vector<double> bytes;                ///< b_i
   double budget = std::numeric_limits<double>::infinity();  ///< S_LM
@@ -67,7 +68,7 @@ const char* toString(SolveStatus s);
 struct SelectionResult {
   SolveStatus status = SolveStatus::kHeuristic;
   std::vector<int> selected;               ///< indices into the problem, ascending
-  std::vector<LandmarkId> selected_ids;    ///< filled by selectLandmarks()
+  std::vector<LandmarkId> selected_ids;    ///< ids of `selected` (when the problem has ids)
   double objective = 0;                    ///< Eq. 14 objective of `selected`
   double support_slack = 0;                ///< Σ ξ_j
   double grid_slack = 0;                   ///< Σ φ_g
