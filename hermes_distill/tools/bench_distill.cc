@@ -63,6 +63,7 @@ int main(int argc, char** argv) {
     data_dir = !ec && std::filesystem::exists(beside / "euroc_gt") ? beside.string() : "/work/shared/data";
   }
   int windows = 10;
+  std::vector<std::string> overrides;
   std::uint64_t seed = 7;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -77,11 +78,37 @@ int main(int argc, char** argv) {
     else if (a == "--windows") windows = std::max(1, std::atoi(next().c_str()));
     else if (a == "--data") data_dir = next();
     else if (a == "--seed") seed = std::strtoull(next().c_str(), nullptr, 10);
+    else if (a == "--set") overrides.push_back(next());
     else if (a == "--help" || a == "-h") {
-      std::printf("hermes_bench_distill [--json FILE] [--windows N] [--data DIR] [--seed S]\n");
+      std::printf("hermes_bench_distill [--json FILE] [--windows N] [--data DIR] [--seed S]\n"
+                  "                     [--set distill.KEY=VALUE ...]  (distill.strategy is swept)\n");
       return 0;
     } else {
       std::fprintf(stderr, "hermes_bench_distill: unknown argument '%s'\n", a.c_str());
+      return 2;
+    }
+  }
+  DistillParams base;
+  {
+    auto cfg = Config::fromString("{}", "--set");
+    if (!cfg) {
+      std::fprintf(stderr, "hermes_bench_distill: %s\n", cfg.error().c_str());
+      return 2;
+    }
+    for (const auto& o : overrides) {
+      const Status st = cfg->applyOverride(o);
+      if (!st) {
+        std::fprintf(stderr, "hermes_bench_distill: --set %s: %s\n", o.c_str(), st.error().c_str());
+        return 2;
+      }
+    }
+    const Status st = base.read(*cfg);
+    if (!st) {
+      std::fprintf(stderr, "hermes_bench_distill: %s\n", st.error().c_str());
+      return 2;
+    }
+    for (const auto& k : cfg->unusedKeys()) {
+      std::fprintf(stderr, "hermes_bench_distill: unknown key '%s'\n", k.c_str());
       return 2;
     }
   }
@@ -109,7 +136,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "\r%s window %d/%d", seq_name.c_str(), w + 1, windows);
       window_lms.push_back(static_cast<double>(win->submap.landmarks.size()));
       window_obs.push_back(static_cast<double>(win->submap.observationCount()));
-      DistillParams params;
+      DistillParams params = base;
       // Selection only: trimmed to max_keyframes, K = 60, 40 % landmark budget.
       const TrimResult trim = trimKeyframes(win->submap, params.max_keyframes, params);
       const Submap trimmed = applyKeyframeTrim(win->submap, trim.kept, params);
@@ -136,7 +163,7 @@ int main(int argc, char** argv) {
       CoordinatorInput in;
       in.bandwidth_Bps = rates[w % 3];
       for (const std::string& s : strategies) {
-        DistillParams dp;
+        DistillParams dp = base;
         dp.strategy = s;
         Distiller d(dp, referenceEncodedSize);
         const DistillResult res = d.distill(win->submap, win->hint, in);
