@@ -1,0 +1,73 @@
+// Bandwidth coordinator (DESIGN §3, Eq. 17): byte budget, byte model, and the
+// choice of (N_KF, K).
+//
+//   S = η · B̂ · Δt · (1 + probe_gain if probing) − backlog_bytes
+//   bytes ≈ c0 + c_KF·N_KF + c_obs·(kept observations) + c_LM·(kept landmarks)
+// The c· are refitted by ridge-regularised least squares (towards the configured
+// prior, so few samples stay well posed) over the most recent real encodings.
+#pragma once
+
+#include <array>
+#include <deque>
+#include <string>
+
+#include "hermes/core/map_types.h"
+#include "hermes/distill/params.h"
+
+namespace hermes {
+namespace distill {
+
+struct CoordinatorInput {
+  double bandwidth_Bps = 0;   ///< B̂, estimated uplink rate [bytes/s]
+  double backlog_bytes = 0;   ///< bytes still unacknowledged in the buffer
+  int loop_closures = 0;      ///< loops found so far (α rule)
+  bool probe = false;         ///< last window's budget was fully delivered: probe higher
+};
+
+/// Eq. 17 budget (may be negative when the backlog exceeds what the link carries).
+double budgetBytes(const DistillParams& params, const CoordinatorInput& in);
+
+class ByteModel {
+ public:
+  explicit ByteModel(const DistillParams& params);
+  double predict(double n_kf, double observations, double n_landmarks) const;
+  /// Records one real encoding and refits the coefficients.
+  void addSample(double n_kf, double observations, double n_landmarks, double bytes);
+  double c0() const { return c_[0]; }
+  double cKf() const { return c_[1]; }
+  double cObs() const { return c_[2]; }
+  double cLm() const { return c_[3]; }
+  std::size_t samples() const { return samples_.size(); }
+
+ private:
+  void refit();
+  std::array<double, 4> prior_;
+  std::array<double, 4> c_;
+  std::deque<std::array<double, 5>> samples_;  // n_kf, obs, lm, 1, bytes
+};
+
+struct CoordinatorPlan {
+  bool defer = false;
+  std::string reason;     ///< why deferred
+  int n_kf = 0;
+  int k = 0;
+  double predicted_bytes = 0;
+};
+
+/// Smallest number of keyframes the floor allows for this window
+/// (max(2, ceil(min_keyframe_rate · span)), at most the window's keyframes).
+int keyframeFloor(const Submap& window, const DistillParams& params);
+
+/// Predicted (kept landmarks, kept observations) of a window distilled to
+/// N keyframes with K landmarks each, from the window's track statistics.
+void predictKept(const Submap& window, int n_kf, int k, double* landmarks, double* observations);
+
+/// Chooses (N_KF, K) by predicted size: the most keyframes in [floor,
+/// min(max_keyframes, n)] that still fit with K = k_pref, then the largest K up
+/// to k_max at that N_KF; if even the floor cannot carry k_pref, the floor with
+/// the largest K down to k_min. Defers when nothing at or above the floor fits.
+CoordinatorPlan planDistillation(const Submap& window, double budget, const ByteModel& model,
+                                 const DistillParams& params);
+
+}  // namespace distill
+}  // namespace hermes

@@ -1,0 +1,89 @@
+// The distillation facade the agent calls every Δt: coordinator -> keyframe
+// trimming -> scores -> landmark selection -> encode-size check (<= max_rounds,
+// shrinking K) -> distilled submap + report, or "defer" (keep it in the buffer).
+//
+// Modes:
+//  * strategy none: raw streaming; the whole window (odometry edges added), no
+//    trimming, no budget (report.over_budget says whether it exceeded S).
+//  * coordinator off: N_KF = max_keyframes, K = fixed_k, no byte budget.
+//  * coordinator on: S from Eq. 17, (N_KF, K) from the byte model, the selector's
+//    hard budget S_LM = S − c0 − c_KF·N_kept; if the real encoded size exceeds S,
+//    K and S_LM shrink by the overshoot ratio and the selection reruns; if it
+//    fits below 80 % of S and K < k_max, K grows by S/size (at most ×2) and the
+//    larger selection is kept if it still fits. At most max_rounds selections;
+//    if none fits, the least valuable landmarks are dropped until the real size
+//    fits (status suffix "+repaired"); only if that fails is the window deferred.
+#pragma once
+
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "hermes/core/config.h"
+#include "hermes/core/map_types.h"
+#include "hermes/distill/coordinator.h"
+#include "hermes/distill/keyframe_trimming.h"
+#include "hermes/distill/landmark_selection.h"
+#include "hermes/distill/params.h"
+#include "hermes/distill/scores.h"
+
+namespace hermes {
+namespace distill {
+
+/// Returns the exact encoded (wire) size of a submap in bytes.
+using EncodedSizeFn = std::function<std::size_t(const Submap&)>;
+
+struct DistillReport {
+  bool ok = true;              ///< false: the window was malformed (see error)
+  std::string error;
+  bool deferred = false;       ///< keep the window in the buffer, send later
+  std::string defer_reason;
+  std::string strategy;
+  std::string selection_status;  ///< toString(SolveStatus) of the kept round (+"+repaired")
+  std::string trim_status;
+  int n_kf_in = 0, n_kf = 0;
+  int n_lm_in = 0, n_lm = 0;
+  std::size_t observations = 0;
+  int k = 0;                   ///< landmarks per keyframe targeted
+  double budget_bytes = 0;     ///< S (infinite with the coordinator off)
+  double bytes_predicted = 0;  ///< byte model of the sent submap
+  std::size_t bytes_actual = 0;  ///< encoder's size (0 without a size function)
+  bool over_budget = false;
+  int rounds = 0;
+  double objective = 0, greedy_objective = 0, support_slack = 0, grid_slack = 0;
+  double alpha = 0, beta = 0;
+  double time_trim_ms = 0, time_scores_ms = 0, time_select_ms = 0, time_encode_ms = 0,
+         time_total_ms = 0;
+};
+
+struct DistillResult {
+  Submap submap;
+  DistillReport report;
+};
+
+class Distiller {
+ public:
+  /// size_fn may be empty: the byte model's prediction is used instead.
+  Distiller(const DistillParams& params, EncodedSizeFn size_fn);
+  ~Distiller();
+
+  /// Fails when params are invalid or name an unknown strategy.
+  static Expected<std::unique_ptr<Distiller>> create(const DistillParams& params,
+                                                     EncodedSizeFn size_fn);
+
+  DistillResult distill(const Submap& window, const MotionHint& hint,
+                        const CoordinatorInput& input);
+
+  const ByteModel& byteModel() const { return model_; }
+  const DistillParams& params() const { return params_; }
+
+ private:
+  DistillParams params_;
+  EncodedSizeFn size_fn_;
+  std::unique_ptr<LandmarkSelector> selector_;
+  ByteModel model_;
+};
+
+}  // namespace distill
+}  // namespace hermes

@@ -1,0 +1,63 @@
+// Keyframe trimming (DESIGN §3, Eq. 15–16 keep-form) and the submap surgery
+// around distillation.
+//
+// sd(a,b) = w_R·angle(R_aᵀR_b) + w_T·‖t_a − t_b‖, s_j = min_{k≠j} sd(j,k).
+//   max Σ_j s_j y_j − λ Σ_l ε_l
+//   s.t. Σ_j y_j ≤ N_KF;  Σ_j E_lj y_j + ε_l ≥ min(2, obs_l);  y_first = y_last = 1;
+//        consecutive kept keyframes share landmarks.
+// Formulation: connectivity is exact, as a path through the window. Arc (a,b),
+// a < b, exists when keyframes a and b share >= trim_min_shared landmarks, or
+// b = a + 1 (the tracker linked them). Binary z_ab with flow conservation
+// Σ_b z_ab = y_a (a ≠ last), Σ_a z_ab = y_b (b ≠ first) forces the kept keyframes
+// to form one chain of arcs from first to last, so every consecutive kept pair is
+// an arc. Landmarks with the same set of observing keyframes share one ε (weighted
+// by their count), which keeps the MILP tiny. CBC solves it warm-started from a
+// dynamic programme (best Σ s_j path with <= N_KF nodes, ignoring coverage); the DP
+// path is also the fallback. If no arc path with <= N_KF keyframes exists, the
+// path with the fewest keyframes is returned (status infeasible_relaxed).
+#pragma once
+
+#include <vector>
+
+#include "hermes/core/map_types.h"
+#include "hermes/distill/landmark_selection.h"
+#include "hermes/distill/params.h"
+
+namespace hermes {
+namespace distill {
+
+/// s_j of every keyframe of the window (0 for a single keyframe).
+std::vector<double> keyframeSeparation(const Submap& window, const DistillParams& params);
+
+/// Number of landmarks keyframes a and b (indices) both observe.
+int sharedLandmarks(const Submap& window, std::size_t a, std::size_t b);
+
+struct TrimResult {
+  SolveStatus status = SolveStatus::kOptimal;
+  std::vector<int> kept;        ///< keyframe indices, ascending, first and last included
+  double objective = 0;         ///< Σ s_j y_j − λ Σ ε_l
+  double coverage_slack = 0;    ///< Σ ε_l
+  double solve_time_s = 0;
+};
+
+TrimResult trimKeyframes(const Submap& window, int max_keyframes, const DistillParams& params);
+
+/// Objective (Eq. 15) of a kept set, and its coverage slack.
+double trimObjective(const Submap& window, const std::vector<int>& kept,
+                     const DistillParams& params, double* coverage_slack = nullptr);
+
+/// The window restricted to `kept` keyframes: observations by dropped keyframes
+/// removed, landmarks that no kept keyframe observes dropped (and their keypoint
+/// links cleared), odometry edges between consecutive kept keyframes with
+/// information = prior (σ_trans, σ_rot) · clamp(shared / odom_shared_ref, 0.05, 1).
+Submap applyKeyframeTrim(const Submap& window, const std::vector<int>& kept,
+                         const DistillParams& params);
+
+/// Keeps the landmarks with the given indices. Keyframes keep only keypoints
+/// linked to kept landmarks unless keep_unlinked_keypoints (raw streaming);
+/// observations are re-indexed.
+Submap keepLandmarks(const Submap& submap, const std::vector<int>& landmark_indices,
+                     bool keep_unlinked_keypoints);
+
+}  // namespace distill
+}  // namespace hermes

@@ -1,0 +1,111 @@
+// Parameters of the map distillation (section `distill.` of the configuration).
+//
+// Keys (units in brackets):
+//   distill.strategy          milp | greedy_logdet | stability | anms | none
+//                             (none = raw streaming: every keyframe and landmark of
+//                             the window, no trimming, no budget)
+//   distill.coordinator       on | off  (a YAML bool true/false is accepted as well);
+//                             off = fixed K (distill.fixed_k), all keyframes up to
+//                             distill.max_keyframes, no byte budget
+//   distill.fixed_k           landmarks kept per keyframe when the coordinator is off
+//   distill.eta               safety factor on the bandwidth budget [-]
+//   distill.window_s          distillation period Δt [s]
+//   distill.probe_gain        budget increase when probing (last window fully delivered) [-]
+//   distill.delta             δ of q_a and f(S) [-]
+//   distill.epsilon           ε of Eq. 14 [-]
+//   distill.lambda_support    λ₁ (per missing landmark of a keyframe's support)
+//   distill.lambda_grid       λ₂ (per uncovered occupied image cell)
+//   distill.grid_cols, distill.grid_rows   image grid of the coverage constraint
+//   distill.milp_time_limit_s CBC time limit per window, shared by its rounds [s]
+//   distill.milp_rel_gap      relative optimality gap at which CBC stops (0 = exact)
+//   distill.milp_warm_start   warm start CBC from the greedy solution [bool]
+//   distill.alpha, distill.beta   fixed score weights (used when adaptive_weights off)
+//   distill.adaptive_weights  α grows with loop closures, β with inter-KF rotation [bool]
+//   distill.alpha_per_loop    α gain per loop closure (saturating at 10 loops)
+//   distill.beta_per_rad      β gain per radian of mean inter-keyframe rotation
+//   distill.future_poses      number of predicted poses of the motion attention
+//   distill.future_horizon_s  horizon of the constant-velocity prediction [s]
+//   distill.trim_w_rot, distill.trim_w_trans  sd() weights [1/rad], [1/m]
+//   distill.trim_lambda       λ of Eq. 15 (per missing landmark observation)
+//   distill.trim_min_shared   landmarks two consecutive kept keyframes must share
+//   distill.trim_time_limit_s CBC time limit of the trimming MILP [s]
+//   distill.max_keyframes     N_KF when the coordinator is off
+//   distill.k_max, distill.k_min   range of K the coordinator may choose
+//   distill.k_pref            K the coordinator keeps before it drops keyframes
+//   distill.min_keyframe_rate_hz   floor: fewer kept keyframes per second -> defer
+//   distill.max_rounds        encode/shrink rounds (<= 3)
+//   distill.odom_sigma_trans, distill.odom_sigma_rot  odometry prior [m], [rad]
+//   distill.odom_shared_ref   shared landmarks at which the prior information applies
+//   distill.bytes_c0, bytes_kf, bytes_obs, bytes_lm   initial byte model [B]
+#pragma once
+
+#include <string>
+
+#include "hermes/core/config.h"
+#include "hermes/core/status.h"
+
+namespace hermes {
+namespace distill {
+
+struct DistillParams {
+  std::string strategy = "milp";
+  bool coordinator = true;
+  int fixed_k = 60;
+
+  // Coordinator (Eq. 17).
+  double eta = 0.8;
+  double window_s = 5.0;
+  double probe_gain = 0.25;
+  int k_max = 150;
+  int k_min = 15;
+  int k_pref = 60;
+  double min_keyframe_rate_hz = 0.4;
+  int max_rounds = 3;
+  int max_keyframes = 12;
+
+  // Scores.
+  double delta = 1e-3;
+  bool adaptive_weights = true;
+  double alpha = 0.5;
+  double beta = 0.5;
+  double alpha_per_loop = 0.2;
+  double beta_per_rad = 4.0;
+  int future_poses = 3;
+  double future_horizon_s = 1.0;
+
+  // Landmark selection (Eq. 14).
+  double epsilon = 0.05;
+  double lambda_support = 2.0;
+  double lambda_grid = 1.5;
+  int grid_cols = 6;
+  int grid_rows = 4;
+  double milp_time_limit_s = 0.1;
+  double milp_rel_gap = 1e-3;
+  bool milp_warm_start = true;
+
+  // Keyframe trimming (Eq. 15-16).
+  double trim_w_rot = 1.0 / 0.1745;  // 10 deg of rotation weigh as much as ...
+  double trim_w_trans = 1.0 / 0.5;   // ... 0.5 m of translation
+  double trim_lambda = 0.05;
+  int trim_min_shared = 10;
+  double trim_time_limit_s = 0.05;
+
+  // Odometry edges.
+  double odom_sigma_trans = 0.02;
+  double odom_sigma_rot = 0.005;
+  int odom_shared_ref = 50;
+
+  // Initial byte model.
+  double bytes_c0 = 256;
+  double bytes_kf = 120;
+  double bytes_obs = 44;
+  double bytes_lm = 64;
+
+  /// Reads every key under `distill.`; missing keys keep their defaults.
+  Status read(const Config& config);
+  Status validate() const;
+  void write(ConfigWriter* out) const;
+};
+
+}  // namespace distill
+}  // namespace hermes

@@ -1,0 +1,247 @@
+#include "hermes/distill/distiller.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <sstream>
+
+#include "hermes/distill/selectors.h"
+
+namespace hermes {
+namespace distill {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+// A fitting selection below this fraction of the budget triggers a larger K.
+constexpr double kFillTarget = 0.8;
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+}  // namespace
+
+Distiller::Distiller(const DistillParams& params, EncodedSizeFn size_fn)
+    : params_(params), size_fn_(std::move(size_fn)), model_(params) {
+  auto sel = makeLandmarkSelector(params.strategy, params);
+  HERMES_CHECK(sel.ok(), sel.error());
+  selector_ = std::move(sel.value());
+}
+
+Distiller::~Distiller() = default;
+
+Expected<std::unique_ptr<Distiller>> Distiller::create(const DistillParams& params,
+                                                       EncodedSizeFn size_fn) {
+  Status v = params.validate();
+  if (!v) return Error{v.error()};
+  auto sel = makeLandmarkSelector(params.strategy, params);
+  if (!sel) return Error{sel.error()};
+  return Expected<std::unique_ptr<Distiller>>(std::make_unique<Distiller>(params, std::move(size_fn)));
+}
+
+DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
+                                 const CoordinatorInput& input) {
+  const auto t_start = Clock::now();
+  DistillResult res;
+  DistillReport& rep = res.report;
+  rep.strategy = params_.strategy;
+  rep.n_kf_in = static_cast<int>(window.keyframes.size());
+  rep.n_lm_in = static_cast<int>(window.landmarks.size());
+  std::string problem = window.validate();
+  for (const Keyframe& kf : window.keyframes) {
+    if (!problem.empty()) break;
+    if (!kf.T_A_C.translation().allFinite() || !kf.T_A_C.quat().coeffs().allFinite())
+      problem = "keyframe " + std::to_string(kf.id) + " has a non-finite pose";
+  }
+  if (hint.valid && (!hint.T_A_C.translation().allFinite() ||
+                     !hint.T_Cprev_Ccurr.translation().allFinite() ||
+                     !hint.T_Cprev_Ccurr.quat().coeffs().allFinite() || !(hint.dt_s > 0)))
+    problem = problem.empty() ? "motion hint is not finite or has dt <= 0" : problem;
+  if (!problem.empty()) {
+    rep.ok = false;
+    rep.error = "distill: malformed window (seq " + std::to_string(window.header.seq) + "): " + problem;
+    return res;
+  }
+  const bool budgeted = params_.coordinator && params_.strategy != "none";
+  rep.budget_bytes = params_.coordinator ? budgetBytes(params_, input)
+                                         : std::numeric_limits<double>::infinity();
+  auto measure = [&](const Submap& s) {
+    const auto t0 = Clock::now();
+    const double pred = model_.predict(static_cast<double>(s.keyframes.size()),
+                                       static_cast<double>(s.observationCount()),
+                                       static_cast<double>(s.landmarks.size()));
+    rep.bytes_predicted = pred;
+    if (size_fn_) {
+      rep.bytes_actual = size_fn_(s);
+      model_.addSample(static_cast<double>(s.keyframes.size()),
+                       static_cast<double>(s.observationCount()),
+                       static_cast<double>(s.landmarks.size()),
+                       static_cast<double>(rep.bytes_actual));
+    }
+    rep.time_encode_ms += msSince(t0);
+    return size_fn_ ? static_cast<double>(rep.bytes_actual) : pred;
+  };
+  auto finish = [&](Submap s) {
+    rep.n_kf = static_cast<int>(s.keyframes.size());
+    rep.n_lm = static_cast<int>(s.landmarks.size());
+    rep.observations = s.observationCount();
+    res.submap = std::move(s);
+    rep.time_total_ms = msSince(t_start);
+    return res;
+  };
+
+  if (window.keyframes.empty()) {
+    rep.selection_status = "empty";
+    return finish(window);
+  }
+
+  // Raw streaming.
+  if (params_.strategy == "none") {
+    std::vector<int> all(window.keyframes.size());
+    std::iota(all.begin(), all.end(), 0);
+    Submap raw = applyKeyframeTrim(window, all, params_);
+    raw.landmarks = window.landmarks;  // even landmarks without observations
+    raw.keyframes = window.keyframes;
+    rep.selection_status = toString(SolveStatus::kUnconstrained);
+    rep.trim_status = "none";
+    rep.rounds = 1;
+    const double bytes = measure(raw);
+    rep.over_budget = bytes > rep.budget_bytes;
+    return finish(std::move(raw));
+  }
+
+  // Plan (N_KF, K).
+  int n_kf = std::min<int>(params_.max_keyframes, static_cast<int>(window.keyframes.size()));
+  int k = params_.fixed_k;
+  if (budgeted) {
+    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, params_);
+    if (plan.defer) {
+      rep.deferred = true;
+      rep.defer_reason = plan.reason;
+      rep.time_total_ms = msSince(t_start);
+      return res;
+    }
+    n_kf = plan.n_kf;
+    k = plan.k;
+  }
+
+  auto t0 = Clock::now();
+  const TrimResult trim = trimKeyframes(window, n_kf, params_);
+  const Submap trimmed = applyKeyframeTrim(window, trim.kept, params_);
+  rep.trim_status = toString(trim.status);
+  rep.time_trim_ms = msSince(t0);
+
+  t0 = Clock::now();
+  const LandmarkScores scores = computeScores(trimmed, hint, input.loop_closures, params_);
+  rep.alpha = scores.weights.alpha;
+  rep.beta = scores.weights.beta;
+  rep.time_scores_ms = msSince(t0);
+
+  const double n_kept = static_cast<double>(trimmed.keyframes.size());
+  double s_lm = budgeted ? rep.budget_bytes - model_.c0() - model_.cKf() * n_kept
+                         : std::numeric_limits<double>::infinity();
+  Submap out;
+  bool have_fit = false;
+  bool floor_hit = false;
+  std::vector<int> last_selected;
+  double last_bytes = 0;
+  Submap fit;
+  DistillReport fit_report;
+  for (int round = 1; round <= params_.max_rounds; ++round) {
+    rep.rounds = round;
+    rep.k = k;
+    t0 = Clock::now();
+    SelectionProblem prob =
+        buildSelectionProblem(trimmed, scores, k, s_lm, model_.cLm(), model_.cObs(), params_);
+    // All rounds together get the MILP time limit (each at least 10 ms).
+    prob.time_limit_s = std::max(0.01, params_.milp_time_limit_s - rep.time_select_ms * 1e-3);
+    const SelectionResult sel = selector_->select(prob);
+    rep.time_select_ms += msSince(t0);
+    rep.selection_status = toString(sel.status);
+    rep.objective = sel.objective;
+    rep.greedy_objective = sel.greedy_objective;
+    rep.support_slack = sel.support_slack;
+    rep.grid_slack = sel.grid_slack;
+    out = keepLandmarks(trimmed, sel.selected, false);
+    last_selected = sel.selected;
+    const double bytes = measure(out);
+    last_bytes = bytes;
+    if (!budgeted) return finish(std::move(out));
+    if (bytes <= rep.budget_bytes) {
+      have_fit = true;
+      fit = std::move(out);
+      fit_report = rep;
+      // Fits. If the byte model was pessimistic and K can grow, try a larger K.
+      if (bytes >= kFillTarget * rep.budget_bytes || k >= params_.k_max) break;
+      k = std::min(params_.k_max,
+                   static_cast<int>(std::ceil(k * std::min(2.0, rep.budget_bytes / bytes))));
+      continue;
+    }
+    if (have_fit) break;  // a grown K overshot: keep the last fitting selection
+    // Too large: shrink K and the landmark budget by the overshoot ratio.
+    const double ratio = rep.budget_bytes / bytes;
+    const int next_k = static_cast<int>(std::floor(k * ratio * 0.95));
+    s_lm = s_lm - (bytes - rep.budget_bytes) * 1.05;
+    if (next_k < params_.k_min || s_lm < 0) {
+      floor_hit = true;  // the floor is reached: defer rather than degrade further
+      break;
+    }
+    k = next_k;
+  }
+  if (have_fit) {
+    const int rounds = rep.rounds;
+    const double t_sel = rep.time_select_ms, t_enc = rep.time_encode_ms;
+    rep = fit_report;
+    rep.rounds = rounds;
+    rep.time_select_ms = t_sel;
+    rep.time_encode_ms = t_enc;
+    return finish(std::move(fit));
+  }
+  // Repair: the rounds missed (byte model off, or CBC cut short). Drop the least
+  // valuable kept landmarks, sized by the real bytes per modelled byte, until the
+  // encoded size fits; a few encodings at most.
+  for (int attempt = 0; attempt < 3 && !floor_hit && !last_selected.empty(); ++attempt) {
+    const double predicted = model_.predict(static_cast<double>(out.keyframes.size()),
+                                            static_cast<double>(out.observationCount()),
+                                            static_cast<double>(out.landmarks.size()));
+    const double real_per_model = last_bytes / std::max(predicted, 1.0);
+    std::vector<int> order = last_selected;
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+      return scores.value[static_cast<std::size_t>(a)] < scores.value[static_cast<std::size_t>(b)];
+    });
+    const double need = (last_bytes - rep.budget_bytes) * 1.05;
+    double saved = 0;
+    std::size_t drop = 0;
+    while (drop < order.size() && saved < need) {
+      const Landmark& lm = trimmed.landmarks[static_cast<std::size_t>(order[drop])];
+      saved += real_per_model *
+               (model_.cLm() + model_.cObs() * static_cast<double>(lm.observations.size()));
+      ++drop;
+    }
+    if (drop >= order.size()) break;
+    last_selected.assign(order.begin() + static_cast<std::ptrdiff_t>(drop), order.end());
+    std::sort(last_selected.begin(), last_selected.end());
+    out = keepLandmarks(trimmed, last_selected, false);
+    last_bytes = measure(out);
+    if (last_bytes <= rep.budget_bytes) {
+      rep.selection_status += "+repaired";
+      return finish(std::move(out));
+    }
+  }
+  rep.over_budget = true;
+  rep.deferred = true;
+  std::ostringstream why;
+  why << "encoded size " << (size_fn_ ? static_cast<double>(rep.bytes_actual) : rep.bytes_predicted)
+      << " B still exceeds the budget " << rep.budget_bytes << " B after " << rep.rounds
+      << " round(s) at the floor K >= " << params_.k_min;
+  rep.defer_reason = why.str();
+  rep.n_kf = static_cast<int>(out.keyframes.size());
+  rep.n_lm = static_cast<int>(out.landmarks.size());
+  rep.observations = out.observationCount();
+  rep.time_total_ms = msSince(t_start);
+  return res;
+}
+
+}  // namespace distill
+}  // namespace hermes

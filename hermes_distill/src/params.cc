@@ -1,0 +1,159 @@
+#include "hermes/distill/params.h"
+
+#include <algorithm>
+#include <cctype>
+
+namespace hermes {
+namespace distill {
+namespace {
+
+const char* kPrefix = "distill.";
+
+// Accepts on/off, true/false, yes/no, 1/0 (YAML may hand either form over).
+Status readOnOff(const Config& c, const std::string& key, bool* out) {
+  if (!c.has(key)) return Status::Ok();
+  std::string v = *out ? "on" : "off";
+  Status s = c.get(key, &v);
+  if (!s) return s;
+  std::transform(v.begin(), v.end(), v.begin(), [](unsigned char ch) { return std::tolower(ch); });
+  if (v == "on" || v == "true" || v == "yes" || v == "1") {
+    *out = true;
+  } else if (v == "off" || v == "false" || v == "no" || v == "0") {
+    *out = false;
+  } else {
+    return Error{"config " + c.origin() + ": key '" + key + "' is '" + v + "', expected on | off"};
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status DistillParams::read(const Config& c) {
+  const std::string p = kPrefix;
+  Status s = c.getChoice(p + "strategy", {"milp", "greedy_logdet", "stability", "anms", "none"},
+                         &strategy);
+#define HERMES_READ(name, var)             \
+  if (s) s = c.get(p + name, &var);
+#define HERMES_READ_BOOL(name, var)        \
+  if (s) s = readOnOff(c, p + name, &var);
+  HERMES_READ_BOOL("coordinator", coordinator)
+  HERMES_READ("fixed_k", fixed_k)
+  HERMES_READ("eta", eta)
+  HERMES_READ("window_s", window_s)
+  HERMES_READ("probe_gain", probe_gain)
+  HERMES_READ("k_max", k_max)
+  HERMES_READ("k_min", k_min)
+  HERMES_READ("k_pref", k_pref)
+  HERMES_READ("min_keyframe_rate_hz", min_keyframe_rate_hz)
+  HERMES_READ("max_rounds", max_rounds)
+  HERMES_READ("max_keyframes", max_keyframes)
+  HERMES_READ("delta", delta)
+  HERMES_READ_BOOL("adaptive_weights", adaptive_weights)
+  HERMES_READ("alpha", alpha)
+  HERMES_READ("beta", beta)
+  HERMES_READ("alpha_per_loop", alpha_per_loop)
+  HERMES_READ("beta_per_rad", beta_per_rad)
+  HERMES_READ("future_poses", future_poses)
+  HERMES_READ("future_horizon_s", future_horizon_s)
+  HERMES_READ("epsilon", epsilon)
+  HERMES_READ("lambda_support", lambda_support)
+  HERMES_READ("lambda_grid", lambda_grid)
+  HERMES_READ("grid_cols", grid_cols)
+  HERMES_READ("grid_rows", grid_rows)
+  HERMES_READ("milp_time_limit_s", milp_time_limit_s)
+  HERMES_READ("milp_rel_gap", milp_rel_gap)
+  HERMES_READ_BOOL("milp_warm_start", milp_warm_start)
+  HERMES_READ("trim_w_rot", trim_w_rot)
+  HERMES_READ("trim_w_trans", trim_w_trans)
+  HERMES_READ("trim_lambda", trim_lambda)
+  HERMES_READ("trim_min_shared", trim_min_shared)
+  HERMES_READ("trim_time_limit_s", trim_time_limit_s)
+  HERMES_READ("odom_sigma_trans", odom_sigma_trans)
+  HERMES_READ("odom_sigma_rot", odom_sigma_rot)
+  HERMES_READ("odom_shared_ref", odom_shared_ref)
+  HERMES_READ("bytes_c0", bytes_c0)
+  HERMES_READ("bytes_kf", bytes_kf)
+  HERMES_READ("bytes_obs", bytes_obs)
+  HERMES_READ("bytes_lm", bytes_lm)
+#undef HERMES_READ
+#undef HERMES_READ_BOOL
+  if (!s) return s;
+  Status v = validate();
+  if (!v) return Error{"config " + c.origin() + ": " + v.error()};
+  return Status::Ok();
+}
+
+Status DistillParams::validate() const {
+  auto bad = [](const std::string& what) { return Status(Error{"distill." + what}); };
+  if (fixed_k < 1) return bad("fixed_k must be >= 1");
+  if (!(eta > 0 && eta <= 1)) return bad("eta must be in (0, 1]");
+  if (!(window_s > 0)) return bad("window_s must be > 0");
+  if (probe_gain < 0) return bad("probe_gain must be >= 0");
+  if (k_min < 1 || k_max < k_min) return bad("k_min/k_max need 1 <= k_min <= k_max");
+  if (min_keyframe_rate_hz < 0) return bad("min_keyframe_rate_hz must be >= 0");
+  if (max_rounds < 1 || max_rounds > 3) return bad("max_rounds must be in [1, 3]");
+  if (max_keyframes < 2) return bad("max_keyframes must be >= 2");
+  if (!(delta > 0)) return bad("delta must be > 0");
+  if (alpha < 0 || beta < 0 || alpha + beta <= 0) return bad("alpha, beta must be >= 0, not both 0");
+  if (alpha_per_loop < 0 || beta_per_rad < 0) return bad("alpha_per_loop/beta_per_rad must be >= 0");
+  if (future_poses < 0 || future_horizon_s < 0) return bad("future_poses/horizon must be >= 0");
+  if (!(epsilon > 0)) return bad("epsilon must be > 0");
+  if (lambda_support < 0 || lambda_grid < 0) return bad("lambdas must be >= 0");
+  if (grid_cols < 1 || grid_rows < 1) return bad("grid_cols/grid_rows must be >= 1");
+  if (milp_rel_gap < 0 || milp_rel_gap >= 1) return bad("milp_rel_gap must be in [0, 1)");
+  if (!(milp_time_limit_s > 0) || !(trim_time_limit_s > 0)) return bad("time limits must be > 0");
+  if (trim_w_rot < 0 || trim_w_trans < 0) return bad("trim weights must be >= 0");
+  if (trim_lambda < 0 || trim_min_shared < 1) return bad("trim_lambda >= 0, trim_min_shared >= 1");
+  if (!(odom_sigma_trans > 0) || !(odom_sigma_rot > 0) || odom_shared_ref < 1)
+    return bad("odometry sigmas must be > 0 and odom_shared_ref >= 1");
+  if (bytes_c0 < 0 || bytes_kf < 0 || !(bytes_obs > 0) || !(bytes_lm > 0))
+    return bad("byte model: c0, kf >= 0 and obs, lm > 0");
+  return Status::Ok();
+}
+
+void DistillParams::write(ConfigWriter* out) const {
+  const std::string p = kPrefix;
+  out->set(p + "strategy", strategy);
+  out->set(p + "coordinator", std::string(coordinator ? "on" : "off"));
+  out->set(p + "fixed_k", fixed_k);
+  out->set(p + "eta", eta);
+  out->set(p + "window_s", window_s);
+  out->set(p + "probe_gain", probe_gain);
+  out->set(p + "k_max", k_max);
+  out->set(p + "k_min", k_min);
+  out->set(p + "k_pref", k_pref);
+  out->set(p + "min_keyframe_rate_hz", min_keyframe_rate_hz);
+  out->set(p + "max_rounds", max_rounds);
+  out->set(p + "max_keyframes", max_keyframes);
+  out->set(p + "delta", delta);
+  out->set(p + "adaptive_weights", adaptive_weights);
+  out->set(p + "alpha", alpha);
+  out->set(p + "beta", beta);
+  out->set(p + "alpha_per_loop", alpha_per_loop);
+  out->set(p + "beta_per_rad", beta_per_rad);
+  out->set(p + "future_poses", future_poses);
+  out->set(p + "future_horizon_s", future_horizon_s);
+  out->set(p + "epsilon", epsilon);
+  out->set(p + "lambda_support", lambda_support);
+  out->set(p + "lambda_grid", lambda_grid);
+  out->set(p + "grid_cols", grid_cols);
+  out->set(p + "grid_rows", grid_rows);
+  out->set(p + "milp_time_limit_s", milp_time_limit_s);
+  out->set(p + "milp_rel_gap", milp_rel_gap);
+  out->set(p + "milp_warm_start", milp_warm_start);
+  out->set(p + "trim_w_rot", trim_w_rot);
+  out->set(p + "trim_w_trans", trim_w_trans);
+  out->set(p + "trim_lambda", trim_lambda);
+  out->set(p + "trim_min_shared", trim_min_shared);
+  out->set(p + "trim_time_limit_s", trim_time_limit_s);
+  out->set(p + "odom_sigma_trans", odom_sigma_trans);
+  out->set(p + "odom_sigma_rot", odom_sigma_rot);
+  out->set(p + "odom_shared_ref", odom_shared_ref);
+  out->set(p + "bytes_c0", bytes_c0);
+  out->set(p + "bytes_kf", bytes_kf);
+  out->set(p + "bytes_obs", bytes_obs);
+  out->set(p + "bytes_lm", bytes_lm);
+}
+
+}  // namespace distill
+}  // namespace hermes

@@ -1,0 +1,112 @@
+// Submap surgery: restrict to kept keyframes (plus odometry edges) and to kept
+// landmarks (keypoints re-indexed).
+#include <algorithm>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "hermes/distill/keyframe_trimming.h"
+
+namespace hermes {
+namespace distill {
+
+int sharedLandmarks(const Submap& w, std::size_t a, std::size_t b) {
+  if (a >= w.keyframes.size() || b >= w.keyframes.size()) return 0;
+  const KeyframeId ia = w.keyframes[a].id, ib = w.keyframes[b].id;
+  int shared = 0;
+  for (const Landmark& lm : w.landmarks) {
+    bool sa = false, sb = false;
+    for (const Observation& ob : lm.observations) {
+      sa = sa || ob.keyframe == ia;
+      sb = sb || ob.keyframe == ib;
+    }
+    shared += (sa && sb) ? 1 : 0;
+  }
+  return shared;
+}
+
+Submap applyKeyframeTrim(const Submap& w, const std::vector<int>& kept,
+                         const DistillParams& params) {
+  Submap out;
+  out.header = w.header;
+  out.cameras = w.cameras;
+  std::unordered_set<KeyframeId> kept_ids;
+  for (int j : kept) {
+    out.keyframes.push_back(w.keyframes[static_cast<std::size_t>(j)]);
+    kept_ids.insert(w.keyframes[static_cast<std::size_t>(j)].id);
+  }
+  std::unordered_set<LandmarkId> kept_lms;
+  for (const Landmark& lm : w.landmarks) {
+    Landmark l = lm;
+    l.observations.clear();
+    for (const Observation& ob : lm.observations)
+      if (kept_ids.count(ob.keyframe)) l.observations.push_back(ob);
+    if (l.observations.empty()) continue;
+    kept_lms.insert(l.id);
+    out.landmarks.push_back(std::move(l));
+  }
+  for (Keyframe& kf : out.keyframes)
+    for (LandmarkId& id : kf.keypoint_landmark)
+      if (id != kInvalidId && !kept_lms.count(id)) id = kInvalidId;
+  Mat6 prior = Mat6::Zero();
+  prior.diagonal().head<3>().setConstant(1.0 / (params.odom_sigma_trans * params.odom_sigma_trans));
+  prior.diagonal().tail<3>().setConstant(1.0 / (params.odom_sigma_rot * params.odom_sigma_rot));
+  for (std::size_t k = 1; k < out.keyframes.size(); ++k) {
+    OdometryEdge e;
+    e.from = out.keyframes[k - 1].id;
+    e.to = out.keyframes[k].id;
+    e.T_from_to = out.keyframes[k - 1].T_A_C.inverse() * out.keyframes[k].T_A_C;
+    const double shared = sharedLandmarks(out, k - 1, k);
+    e.information = prior * std::clamp(shared / params.odom_shared_ref, 0.05, 1.0);
+    out.odometry.push_back(e);
+  }
+  return out;
+}
+
+Submap keepLandmarks(const Submap& s, const std::vector<int>& landmark_indices,
+                     bool keep_unlinked_keypoints) {
+  Submap out;
+  out.header = s.header;
+  out.cameras = s.cameras;
+  out.odometry = s.odometry;
+  std::unordered_set<LandmarkId> keep;
+  for (int i : landmark_indices) keep.insert(s.landmarks[static_cast<std::size_t>(i)].id);
+  // Old keypoint index -> new, per keyframe.
+  std::unordered_map<KeyframeId, std::vector<std::uint32_t>> remap;
+  for (const Keyframe& kf : s.keyframes) {
+    Keyframe k = kf;
+    k.keypoints.clear();
+    k.descriptors.clear();
+    k.keypoint_landmark.clear();
+    std::vector<std::uint32_t>& map = remap[kf.id];
+    map.assign(kf.keypoints.size(), ~std::uint32_t{0});
+    for (std::size_t p = 0; p < kf.keypoints.size(); ++p) {
+      const LandmarkId id = kf.keypoint_landmark[p];
+      const bool linked = id != kInvalidId && keep.count(id);
+      if (!linked && !keep_unlinked_keypoints) continue;
+      map[p] = static_cast<std::uint32_t>(k.keypoints.size());
+      k.keypoints.push_back(kf.keypoints[p]);
+      k.descriptors.push_back(kf.descriptors[p]);
+      k.keypoint_landmark.push_back(linked ? id : kInvalidId);
+    }
+    out.keyframes.push_back(std::move(k));
+  }
+  std::vector<int> sorted = landmark_indices;
+  std::sort(sorted.begin(), sorted.end());
+  for (int i : sorted) {
+    Landmark l = s.landmarks[static_cast<std::size_t>(i)];
+    std::vector<Observation> obs;
+    for (const Observation& ob : l.observations) {
+      auto it = remap.find(ob.keyframe);
+      if (it == remap.end() || ob.keypoint >= it->second.size()) continue;
+      const std::uint32_t np = it->second[ob.keypoint];
+      if (np == ~std::uint32_t{0}) continue;
+      obs.push_back({ob.keyframe, np});
+    }
+    l.observations = std::move(obs);
+    out.landmarks.push_back(std::move(l));
+  }
+  return out;
+}
+
+}  // namespace distill
+}  // namespace hermes

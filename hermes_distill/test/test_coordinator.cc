@@ -1,0 +1,259 @@
+// Bandwidth coordinator (Eq. 17), byte model refit, the Distiller facade and
+// the `distill.` configuration keys.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "distill_fixture.h"
+#include "hermes/distill/distiller.h"
+
+namespace hermes {
+namespace distill {
+namespace {
+
+TEST(Coordinator, BudgetFollowsEq17AndProbes) {
+  DistillParams p;
+  p.eta = 0.8;
+  p.window_s = 5.0;
+  p.probe_gain = 0.25;
+  CoordinatorInput in;
+  in.bandwidth_Bps = 10000;
+  in.backlog_bytes = 3000;
+  EXPECT_NEAR(budgetBytes(p, in), 0.8 * 10000 * 5 - 3000, 1e-9);
+  in.probe = true;
+  EXPECT_NEAR(budgetBytes(p, in), 0.8 * 10000 * 5 * 1.25 - 3000, 1e-9);
+  in.bandwidth_Bps = 0;
+  EXPECT_LT(budgetBytes(p, in), 0);
+}
+
+TEST(Coordinator, ByteModelRefitRecoversTheEncoderCoefficients) {
+  DistillParams p;  // prior deliberately off from the truth below
+  ByteModel m(p);
+  auto truth = [](double kf, double obs, double lm) { return 500 + 300 * kf + 61 * obs + 80 * lm; };
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  for (int i = 0; i < 40; ++i) {
+    const double kf = 2 + std::floor(uni(rng) * 10), lm = 50 + uni(rng) * 800, obs = lm * (1.5 + uni(rng) * 3);
+    m.addSample(kf, obs, lm, truth(kf, obs, lm));
+  }
+  for (int i = 0; i < 10; ++i) {
+    const double kf = 3 + i, lm = 100 + 60 * i, obs = 3 * lm;
+    EXPECT_NEAR(m.predict(kf, obs, lm) / truth(kf, obs, lm), 1.0, 0.03);
+  }
+  EXPECT_NEAR(m.cObs(), 61, 3);
+}
+
+TEST(Coordinator, ShrinksToFitTheBudget) {
+  const SyntheticWindow w = testing::window("MH_01_easy", 50.0);
+  const double raw = static_cast<double>(referenceEncodedSize(w.submap));
+  DistillParams p;
+  p.milp_time_limit_s = 0.5;
+  Distiller d(p, referenceEncodedSize);
+  for (double fraction : {0.5, 0.25, 0.12}) {
+    CoordinatorInput in;
+    in.bandwidth_Bps = fraction * raw / (p.eta * p.window_s);
+    const DistillResult r = d.distill(w.submap, w.hint, in);
+    ASSERT_TRUE(r.report.ok) << r.report.error;
+    ASSERT_FALSE(r.report.deferred) << r.report.defer_reason;
+    EXPECT_NEAR(r.report.budget_bytes, fraction * raw, 1e-6 * raw);
+    EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes);
+    EXPECT_EQ(r.report.bytes_actual, referenceEncodedSize(r.submap));
+    EXPECT_EQ(r.submap.validate(), "");
+    EXPECT_LE(r.report.n_kf, p.max_keyframes);
+    EXPECT_GT(r.report.n_lm, 0);
+    EXPECT_EQ(r.submap.odometry.size(), r.submap.keyframes.size() - 1);
+    // Budget-bound instances can be hard for CBC: then the incumbent at the time
+    // limit, never worse than the greedy warm start.
+    EXPECT_TRUE(r.report.selection_status == "optimal" || r.report.selection_status == "time_limited")
+        << r.report.selection_status;
+    EXPECT_LE(r.report.objective, r.report.greedy_objective + 1e-9);
+  }
+}
+
+TEST(Coordinator, ReselectsWhenTheByteModelUnderestimates) {
+  const SyntheticWindow w = testing::window("V1_01_easy", 70.0);
+  DistillParams p;
+  p.bytes_obs = 5;  // far below the real ~65 B per observation
+  p.bytes_lm = 5;
+  p.bytes_kf = 10;
+  Distiller d(p, referenceEncodedSize);
+  CoordinatorInput in;
+  in.bandwidth_Bps = 0.3 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);
+  const DistillResult r = d.distill(w.submap, w.hint, in);
+  ASSERT_TRUE(r.report.ok);
+  EXPECT_GT(r.report.rounds, 1);
+  EXPECT_LE(r.report.rounds, 3);
+  if (!r.report.deferred) {
+    EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes);
+  }
+  EXPECT_GT(d.byteModel().cObs(), 20.0);  // refitted from the real sizes
+  // With the refitted model the next window fits in one round.
+  const DistillResult r2 = d.distill(w.submap, w.hint, in);
+  ASSERT_FALSE(r2.report.deferred) << r2.report.defer_reason;
+  EXPECT_LE(static_cast<double>(r2.report.bytes_actual), r2.report.budget_bytes);
+}
+
+TEST(Coordinator, RepairsWhenTheRoundsRunOut) {
+  const SyntheticWindow w = testing::window("MH_01_easy", 140.0);
+  DistillParams p;
+  p.max_rounds = 1;
+  p.bytes_obs = 30;  // real: ~65 B per observation, so the single round overshoots
+  p.bytes_lm = 30;
+  Distiller d(p, referenceEncodedSize);
+  CoordinatorInput in;
+  in.bandwidth_Bps = 0.08 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);
+  const DistillResult r = d.distill(w.submap, w.hint, in);
+  ASSERT_FALSE(r.report.deferred) << r.report.defer_reason;
+  EXPECT_NE(r.report.selection_status.find("+repaired"), std::string::npos)
+      << r.report.selection_status << " k=" << r.report.k << " bytes=" << r.report.bytes_actual
+      << " budget=" << r.report.budget_bytes;
+  EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes);
+  EXPECT_EQ(r.report.bytes_actual, referenceEncodedSize(r.submap));
+  EXPECT_EQ(r.submap.validate(), "");
+}
+
+TEST(Coordinator, DefersBelowTheFloor) {
+  const SyntheticWindow w = testing::window("MH_01_easy", 90.0);
+  DistillParams p;
+  Distiller d(p, referenceEncodedSize);
+  CoordinatorInput in;
+  in.bandwidth_Bps = 200;  // 800 B per window: far below 2 KFs × K_min
+  const DistillResult r = d.distill(w.submap, w.hint, in);
+  EXPECT_TRUE(r.report.ok);
+  EXPECT_TRUE(r.report.deferred);
+  EXPECT_FALSE(r.report.defer_reason.empty());
+  in.bandwidth_Bps = 0;  // outage
+  in.backlog_bytes = 1e5;
+  EXPECT_TRUE(d.distill(w.submap, w.hint, in).report.deferred);
+}
+
+TEST(Coordinator, ProbingSendsMore) {
+  const SyntheticWindow w = testing::window("V1_01_easy", 100.0);
+  DistillParams p;
+  CoordinatorInput in;
+  in.bandwidth_Bps = 0.15 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);
+  const DistillResult base = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
+  in.probe = true;  // same (fresh) byte model, 25 % more budget
+  const DistillResult probe = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
+  ASSERT_FALSE(base.report.deferred);
+  ASSERT_FALSE(probe.report.deferred);
+  EXPECT_NEAR(probe.report.budget_bytes, 1.25 * base.report.budget_bytes, 1e-6);
+  EXPECT_GT(probe.report.bytes_actual, base.report.bytes_actual);
+  EXPECT_LE(static_cast<double>(probe.report.bytes_actual), probe.report.budget_bytes);
+}
+
+TEST(Coordinator, OffUsesFixedKAndNoneStreamsEverything) {
+  const SyntheticWindow w = testing::window("MH_01_easy", 130.0);
+  DistillParams p;
+  p.coordinator = false;
+  p.fixed_k = 25;
+  p.max_keyframes = 6;
+  const DistillResult off = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, {});
+  EXPECT_FALSE(off.report.deferred);
+  EXPECT_EQ(off.report.k, 25);
+  EXPECT_LE(off.report.n_kf, 6);
+  EXPECT_TRUE(std::isinf(off.report.budget_bytes));
+  for (const auto& kf : off.submap.keyframes)  // support >= min(K, n_j)
+    EXPECT_GE(kf.keypoints.size(), 25u);
+  p.strategy = "none";
+  p.coordinator = true;
+  CoordinatorInput in;
+  in.bandwidth_Bps = 1000;
+  const DistillResult raw = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
+  EXPECT_FALSE(raw.report.deferred);
+  EXPECT_TRUE(raw.report.over_budget);
+  EXPECT_EQ(raw.submap.keyframes.size(), w.submap.keyframes.size());
+  EXPECT_EQ(raw.submap.landmarks.size(), w.submap.landmarks.size());
+  EXPECT_EQ(raw.submap.observationCount(), w.submap.observationCount());
+}
+
+TEST(Coordinator, EveryStrategyFitsTheBudgetEndToEnd) {
+  for (const std::string s : {"milp", "greedy_logdet", "stability", "anms"}) {
+    DistillParams p;
+    p.strategy = s;
+    Distiller d(p, referenceEncodedSize);
+    for (double t : {25.0, 75.0}) {
+      const SyntheticWindow w = testing::window("MH_01_easy", t);
+      CoordinatorInput in;
+      in.bandwidth_Bps = 0.2 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);
+      const DistillResult r = d.distill(w.submap, w.hint, in);
+      ASSERT_FALSE(r.report.deferred) << s << ": " << r.report.defer_reason;
+      EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes) << s;
+    }
+  }
+}
+
+TEST(Coordinator, MalformedWindowIsAnErrorNotACrash) {
+  SyntheticWindow w = testing::window("MH_01_easy", 10.0);
+  w.submap.landmarks[0].observations.push_back({987654321, 0});
+  Distiller d(DistillParams{}, referenceEncodedSize);
+  const DistillResult r = d.distill(w.submap, w.hint, {});
+  EXPECT_FALSE(r.report.ok);
+  EXPECT_NE(r.report.error.find("987654321"), std::string::npos);
+}
+
+TEST(Coordinator, DegenerateWindowsDoNotBreakAnyStrategy) {
+  const SyntheticWindow w = testing::window("V1_01_easy", 110.0);
+  Submap one = w.submap;  // a single keyframe
+  one.keyframes.resize(1);
+  for (auto& lm : one.landmarks) {
+    std::vector<Observation> keep;
+    for (const auto& ob : lm.observations)
+      if (ob.keyframe == one.keyframes[0].id) keep.push_back(ob);
+    lm.observations = keep;
+  }
+  Submap no_landmarks = w.submap;
+  no_landmarks.landmarks.clear();
+  for (auto& kf : no_landmarks.keyframes)
+    std::fill(kf.keypoint_landmark.begin(), kf.keypoint_landmark.end(), kInvalidId);
+  Submap empty;
+  empty.cameras = w.submap.cameras;
+  Submap bad_pose = w.submap;
+  bad_pose.keyframes[2].T_A_C = SE3(Quat::Identity(), Vec3(NAN, 0, 0));
+  for (const std::string s : {"milp", "greedy_logdet", "stability", "anms", "none"}) {
+    DistillParams p;
+    p.strategy = s;
+    Distiller d(p, referenceEncodedSize);
+    CoordinatorInput in;
+    in.bandwidth_Bps = 50000;
+    for (const Submap* sm : {&one, &no_landmarks, &empty}) {
+      const DistillResult r = d.distill(*sm, w.hint, in);
+      EXPECT_TRUE(r.report.ok) << s << ": " << r.report.error;
+      if (!r.report.deferred) {
+        EXPECT_EQ(r.submap.validate(), "") << s;
+      }
+    }
+    const DistillResult r = d.distill(bad_pose, w.hint, in);
+    EXPECT_FALSE(r.report.ok) << s;
+    EXPECT_NE(r.report.error.find("non-finite pose"), std::string::npos) << r.report.error;
+  }
+}
+
+TEST(Params, ReadsTheDistillSection) {
+  auto cfg = Config::fromString(
+      "distill:\n  strategy: greedy_logdet\n  coordinator: off\n  fixed_k: 40\n  eta: 0.7\n", "test.yaml");
+  ASSERT_TRUE(cfg.ok()) << cfg.error();
+  DistillParams p;
+  ASSERT_TRUE(p.read(*cfg)) ;
+  EXPECT_EQ(p.strategy, "greedy_logdet");
+  EXPECT_FALSE(p.coordinator);
+  EXPECT_EQ(p.fixed_k, 40);
+  EXPECT_DOUBLE_EQ(p.eta, 0.7);
+  EXPECT_TRUE(cfg->unusedKeys().empty());
+  ASSERT_TRUE(cfg->applyOverride("distill.coordinator=on"));
+  ASSERT_TRUE(p.read(*cfg));
+  EXPECT_TRUE(p.coordinator);
+  for (const char* bad : {"distill.strategy=gurobi", "distill.coordinator=maybe", "distill.eta=3",
+                          "distill.fixed_k=0"}) {
+    auto c = Config::fromString("distill:\n  strategy: milp\n", "bad.yaml");
+    ASSERT_TRUE(c->applyOverride(bad));
+    DistillParams q;
+    const Status s = q.read(*c);
+    EXPECT_FALSE(s.ok()) << bad;
+  }
+  EXPECT_FALSE(Distiller::create([] { DistillParams q; q.k_min = 0; return q; }(), nullptr).ok());
+}
+
+}  // namespace
+}  // namespace distill
+}  // namespace hermes

@@ -1,0 +1,152 @@
+// Keyframe trimming (Eq. 15-16): optimality against brute force, first/last
+// kept, N_KF respected, connectivity, and the submap surgery around it.
+#include <gtest/gtest.h>
+
+#include <limits>
+#include <set>
+#include <unordered_set>
+
+#include "distill_fixture.h"
+#include "hermes/distill/keyframe_trimming.h"
+
+namespace hermes {
+namespace distill {
+namespace {
+
+bool connected(const Submap& w, const std::vector<int>& kept, int min_shared) {
+  for (std::size_t k = 1; k < kept.size(); ++k) {
+    const bool adjacent = kept[k] == kept[k - 1] + 1;
+    if (!adjacent && sharedLandmarks(w, static_cast<std::size_t>(kept[k - 1]), static_cast<std::size_t>(kept[k])) < min_shared)
+      return false;
+  }
+  return true;
+}
+
+TEST(Trimming, KeepsEndsRespectsBudgetAndStaysConnected) {
+  DistillParams params;
+  for (const std::string seq : {"MH_01_easy", "V1_01_easy"}) {
+    for (double t : {20.0, 70.0}) {
+      const Submap w = testing::window(seq, t).submap;
+      const int n = static_cast<int>(w.keyframes.size());
+      ASSERT_GE(n, 10);
+      for (int N = 2; N <= n; ++N) {
+        const TrimResult r = trimKeyframes(w, N, params);
+        ASSERT_FALSE(r.kept.empty());
+        EXPECT_EQ(r.kept.front(), 0);
+        EXPECT_EQ(r.kept.back(), n - 1);
+        EXPECT_TRUE(connected(w, r.kept, params.trim_min_shared)) << seq << " N=" << N;
+        if (r.status != SolveStatus::kInfeasibleRelaxed) {
+          EXPECT_LE(static_cast<int>(r.kept.size()), N);
+        }
+        EXPECT_TRUE(std::is_sorted(r.kept.begin(), r.kept.end()));
+      }
+    }
+  }
+}
+
+TEST(Trimming, MilpMatchesBruteForce) {
+  DistillParams params;
+  params.trim_time_limit_s = 5.0;
+  params.trim_lambda = 0.01;
+  for (double t : {15.0, 55.0, 95.0}) {
+    const Submap w = testing::window("MH_01_easy", t).submap;
+    const int n = static_cast<int>(w.keyframes.size());
+    for (int N : {3, 5, 7}) {
+      double best = -std::numeric_limits<double>::infinity();
+      for (std::uint32_t mask = 0; mask < (1u << (n - 2)); ++mask) {
+        std::vector<int> kept = {0};
+        for (int j = 1; j < n - 1; ++j)
+          if (mask & (1u << (j - 1))) kept.push_back(j);
+        kept.push_back(n - 1);
+        if (static_cast<int>(kept.size()) > N || !connected(w, kept, params.trim_min_shared)) continue;
+        best = std::max(best, trimObjective(w, kept, params));
+      }
+      const TrimResult r = trimKeyframes(w, N, params);
+      EXPECT_EQ(r.status, SolveStatus::kOptimal);
+      EXPECT_NEAR(r.objective, best, 1e-6) << "t=" << t << " N=" << N;
+    }
+  }
+}
+
+TEST(Trimming, UnreachableBudgetKeepsTheShortestConnectedChain) {
+  DistillParams params;
+  params.trim_min_shared = 1000000;  // only tracker-adjacent keyframes connect
+  const Submap w = testing::window("V1_01_easy", 40.0).submap;
+  const TrimResult r = trimKeyframes(w, 3, params);
+  EXPECT_EQ(r.status, SolveStatus::kInfeasibleRelaxed);
+  EXPECT_EQ(r.kept.size(), w.keyframes.size());
+}
+
+TEST(Trimming, SeparationIsTheDistanceToTheNearestOtherKeyframe) {
+  Submap w;
+  w.cameras.push_back(eurocCam0Intrinsics());
+  for (int k = 0; k < 3; ++k) {
+    Keyframe kf;
+    kf.id = static_cast<KeyframeId>(k + 1);
+    kf.T_A_C = SE3(Mat3::Identity(), Vec3(k == 2 ? 3.0 : k * 1.0, 0, 0));
+    w.keyframes.push_back(kf);
+  }
+  DistillParams params;
+  params.trim_w_trans = 2.0;
+  const auto s = keyframeSeparation(w, params);
+  EXPECT_NEAR(s[0], 2.0, 1e-12);
+  EXPECT_NEAR(s[1], 2.0, 1e-12);
+  EXPECT_NEAR(s[2], 4.0, 1e-12);
+}
+
+TEST(Trimming, AppliedTrimDropsOrphansAndAddsOdometry) {
+  DistillParams params;
+  const Submap w = testing::window("MH_01_easy", 100.0).submap;
+  const TrimResult r = trimKeyframes(w, 4, params);
+  const Submap t = applyKeyframeTrim(w, r.kept, params);
+  EXPECT_EQ(t.validate(), "");
+  ASSERT_EQ(t.keyframes.size(), r.kept.size());
+  std::unordered_set<KeyframeId> kept;
+  for (const auto& kf : t.keyframes) kept.insert(kf.id);
+  std::unordered_set<LandmarkId> in_trim;
+  for (const auto& lm : t.landmarks) {
+    EXPECT_FALSE(lm.observations.empty());
+    in_trim.insert(lm.id);
+  }
+  for (const auto& lm : w.landmarks) {
+    bool seen = false;
+    for (const auto& ob : lm.observations) seen = seen || kept.count(ob.keyframe);
+    EXPECT_EQ(seen, in_trim.count(lm.id) == 1);
+  }
+  ASSERT_EQ(t.odometry.size(), t.keyframes.size() - 1);
+  for (std::size_t k = 0; k < t.odometry.size(); ++k) {
+    const OdometryEdge& e = t.odometry[k];
+    EXPECT_EQ(e.from, t.keyframes[k].id);
+    EXPECT_EQ(e.to, t.keyframes[k + 1].id);
+    const SE3 T_A_to = t.keyframes[k].T_A_C * e.T_from_to;
+    EXPECT_LT((T_A_to.translation() - t.keyframes[k + 1].T_A_C.translation()).norm(), 1e-9);
+    EXPECT_GT(e.information(0, 0), 0.0);
+    EXPECT_LE(e.information(0, 0), 1.0 / (params.odom_sigma_trans * params.odom_sigma_trans) + 1e-6);
+  }
+}
+
+TEST(Trimming, KeepLandmarksReindexesKeypoints) {
+  const Submap w = testing::window("V1_01_easy", 60.0).submap;
+  std::vector<int> keep;
+  for (int i = 0; i < static_cast<int>(w.landmarks.size()); i += 3) keep.push_back(i);
+  const Submap s = keepLandmarks(w, keep, false);
+  EXPECT_EQ(s.validate(), "");
+  EXPECT_EQ(s.landmarks.size(), keep.size());
+  std::size_t keypoints = 0;
+  for (const auto& kf : s.keyframes) keypoints += kf.keypoints.size();
+  EXPECT_EQ(keypoints, s.observationCount());
+  for (const auto& lm : s.landmarks)
+    for (const auto& ob : lm.observations) {
+      const Keyframe* kf = nullptr;
+      for (const auto& k : s.keyframes) if (k.id == ob.keyframe) kf = &k;
+      ASSERT_NE(kf, nullptr);
+      EXPECT_EQ(kf->keypoint_landmark[ob.keypoint], lm.id);
+    }
+  const Submap raw = keepLandmarks(w, keep, true);
+  EXPECT_EQ(raw.validate(), "");
+  EXPECT_EQ(raw.keyframes[0].keypoints.size(), w.keyframes[0].keypoints.size());
+}
+
+}  // namespace
+}  // namespace distill
+}  // namespace hermes
