@@ -184,6 +184,11 @@ ArrivalDecision Bookkeeper::onArrival(const SubmapArrival& arrival, double now) 
   return d;
 }
 
+bool Bookkeeper::isDuplicate(RobotId robot, std::uint32_t session, std::uint64_t seq) const {
+  auto it = seqs_.find({robot, session});
+  return it != seqs_.end() && it->second.seen.count(seq) > 0;
+}
+
 Status Bookkeeper::markApplied(RobotId robot, std::uint32_t session, std::uint64_t seq) {
   if (robot >= agents_.size())
     return Error{"bookkeeper: markApplied for unknown robot id " + std::to_string(robot)};

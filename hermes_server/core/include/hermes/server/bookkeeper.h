@@ -128,6 +128,8 @@ class Bookkeeper {
   ArrivalDecision onArrival(const SubmapArrival& arrival, double now);
   /// The merger applied an accepted submap.
   Status markApplied(RobotId robot, std::uint32_t session, std::uint64_t seq);
+  /// True if (robot, session, seq) was already accepted (a resend).
+  bool isDuplicate(RobotId robot, std::uint32_t session, std::uint64_t seq) const;
 
   KeyframeKey key(RobotId robot, std::uint32_t session, KeyframeId id) const {
     return KeyframeKey{robot, session, id};
