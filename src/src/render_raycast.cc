@@ -29,9 +29,11 @@ inline int fastFloor(float x) {
   return i - (x < static_cast<float>(i));
 }
 
-/// Bilinear sample of one mip level at level-0 texel coordinates (x, y).
+/// Bilinear sample of one mip level at continuous level-0 texel coordinates
+/// (x, y) (texel i covers [i, i+1)). cv::pyrDown centres level-L texel j on
+/// level-0 texel index 2^L j, i.e. continuous coordinate 2^L j + 0.5.
 inline float sampleLevel(const cv::Mat& m, float x, float y, float inv_scale) {
-  const float fx = x * inv_scale - 0.5f, fy = y * inv_scale - 0.5f;
+  const float fx = (x - 0.5f) * inv_scale, fy = (y - 0.5f) * inv_scale;
   int x0 = fastFloor(fx), y0 = fastFloor(fy);
   const float ax = fx - x0, ay = fy - y0;
   int x1 = x0 + 1, y1 = y0 + 1;

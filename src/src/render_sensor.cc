@@ -30,6 +30,10 @@ Status SensorParams::validate() const {
 }
 
 Sensor::Sensor(const SensorParams& p, std::uint64_t seed, int width, int height) : p_(p), seed_(seed) {
+  cv::Mat table(1, 1 << 21, CV_32F);
+  cv::RNG table_rng(mixSeed(seed, 0x401));
+  table_rng.fill(table, cv::RNG::NORMAL, 0.0, 1.0);
+  noise_table_.assign(table.ptr<float>(), table.ptr<float>() + table.cols);
   vignette_.create(height, width, CV_32F);
   const double cx = 0.5 * (width - 1), cy = 0.5 * (height - 1);
   const double r2max = cx * cx + cy * cy;
@@ -62,21 +66,26 @@ double Sensor::gain(double t) const {
 
 cv::Mat Sensor::expose(const cv::Mat& radiance, double t, int cam) const {
   const float g = static_cast<float>(gain(t) * (cam == 0 ? 1.0 : 0.97));
-  cv::Mat noise;
-  if (p_.noise && p_.noise_sigma > 0) {
-    const auto tns = static_cast<std::uint64_t>(std::llround(t * 1e6));  // us: frame identity
-    cv::RNG rng(mixSeed(mixSeed(seed_, tns), static_cast<std::uint64_t>(cam) + 100));
-    noise.create(radiance.size(), CV_32F);
-    rng.fill(noise, cv::RNG::NORMAL, 0.0, p_.noise_sigma);
-  }
+  // Noise: a per-frame odd stride walk through a fixed table of N(0,1) samples
+  // (a permutation of the table, so no sample repeats within a frame).
+  const bool noisy = p_.noise && p_.noise_sigma > 0;
+  const auto tns = static_cast<std::uint64_t>(std::llround(t * 1e6));  // us: frame identity
+  const std::uint64_t h = mixSeed(mixSeed(seed_, tns), static_cast<std::uint64_t>(cam) + 100);
+  const std::uint32_t mask = static_cast<std::uint32_t>(noise_table_.size() - 1);
+  std::uint32_t idx = static_cast<std::uint32_t>(h) & mask;
+  const std::uint32_t stride = (static_cast<std::uint32_t>(h >> 32) | 1u) & mask;
+  const float sigma = static_cast<float>(p_.noise_sigma);
   cv::Mat out(radiance.size(), CV_8U);
   for (int v = 0; v < radiance.rows; ++v) {
     const float* r = radiance.ptr<float>(v);
     const float* vg = vignette_.ptr<float>(v);
-    const float* n = noise.empty() ? nullptr : noise.ptr<float>(v);
     std::uint8_t* o = out.ptr<std::uint8_t>(v);
     for (int u = 0; u < radiance.cols; ++u) {
-      float x = r[u] * g * vg[u] + (n ? n[u] : 0.0f) + 0.5f;
+      float x = r[u] * g * vg[u] + 0.5f;
+      if (noisy) {
+        x += sigma * noise_table_[idx];
+        idx = (idx + stride) & mask;
+      }
       x = std::min(std::max(x, 0.0f), 255.0f);
       o[u] = static_cast<std::uint8_t>(x);
     }

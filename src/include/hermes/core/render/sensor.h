@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -36,6 +37,7 @@ class Sensor {
   SensorParams p_;
   std::uint64_t seed_;
   cv::Mat vignette_;  ///< CV_32F multiplicative factor
+  std::vector<float> noise_table_;  ///< 2^21 N(0,1) samples
 };
 
 /// SplitMix64 hash, used to derive independent seeds.
