@@ -124,7 +124,12 @@ struct Raycaster::Hit {
 };
 
 Raycaster::Raycaster(const Scene& scene, RayGrid rays) : scene_(scene), rays_(std::move(rays)) {
+  room_lo_ = scene_.room.lo.cast<float>();
+  room_hi_ = scene_.room.hi.cast<float>();
+  inv_texel_ = static_cast<float>(1.0 / scene_.texel_m);
   for (const SceneBox& b : scene_.objects) {
+    lo_.push_back(b.lo.cast<float>());
+    hi_.push_back(b.hi.cast<float>());
     centre_.push_back((0.5 * (b.lo + b.hi)).cast<float>());
     radius_.push_back(static_cast<float>(0.5 * (b.hi - b.lo).norm()) + 1e-3f);
   }
@@ -138,7 +143,8 @@ void Raycaster::castRay(const Eigen::Vector3f& o, const Eigen::Vector3f& d, floa
     inv[k] = 1.0f / dk;
   }
   // Room, seen from inside: the exit of the slab box.
-  const Eigen::Vector3f rlo = scene_.room.lo.cast<float>(), rhi = scene_.room.hi.cast<float>();
+  const Eigen::Vector3f& rlo = room_lo_;
+  const Eigen::Vector3f& rhi = room_hi_;
   float best = 3.4e38f;
   int axis = 0;
   for (int k = 0; k < 3; ++k) {
@@ -152,13 +158,14 @@ void Raycaster::castRay(const Eigen::Vector3f& o, const Eigen::Vector3f& d, floa
   hit->box = -1;
   hit->face = 2 * axis + (inv[axis] > 0 ? 1 : 0);
   for (int c = 0; c < ncand; ++c) {
-    const SceneBox& b = scene_.objects[cand[c]];
+    const Eigen::Vector3f& blo = lo_[cand[c]];
+    const Eigen::Vector3f& bhi = hi_[cand[c]];
     float tnear = 0, tfar = hit->t;
     int near_axis = -1;
     bool ok = true;
     for (int k = 0; k < 3 && ok; ++k) {
-      float t0 = (static_cast<float>(b.lo[k]) - o[k]) * inv[k];
-      float t1 = (static_cast<float>(b.hi[k]) - o[k]) * inv[k];
+      float t0 = (blo[k] - o[k]) * inv[k];
+      float t1 = (bhi[k] - o[k]) * inv[k];
       if (t0 > t1) std::swap(t0, t1);
       if (t0 > tnear) {
         tnear = t0;
@@ -182,10 +189,11 @@ float Raycaster::shade(const Eigen::Vector3f& o, const Eigen::Vector3f& d, const
   if (tex_id < 0) return 0.0f;
   const MipTexture& tex = scene_.textures[tex_id];
   const int a = hit.face / 2, ua = (a + 1) % 3, va = (a + 2) % 3;
-  const float inv_texel = static_cast<float>(1.0 / scene_.texel_m);
+  const float inv_texel = inv_texel_;
   const Eigen::Vector3f p = o + hit.t * d;
-  const float x = (p[ua] - static_cast<float>(b.lo[ua])) * inv_texel;
-  const float y = (p[va] - static_cast<float>(b.lo[va])) * inv_texel;
+  const Eigen::Vector3f& lo = hit.box < 0 ? room_lo_ : lo_[hit.box];
+  const float x = (p[ua] - lo[ua]) * inv_texel;
+  const float y = (p[va] - lo[va]) * inv_texel;
   // Footprint: pixel angle x range, stretched by obliquity (exponent < 1 keeps
   // grazing floors from blurring away entirely; aliasing stays negligible).
   const float cos_inc = std::max(std::abs(d[a]) / ray_norm, 0.05f);

@@ -69,6 +69,9 @@ class Raycaster {
 
   const Scene& scene_;
   RayGrid rays_;
+  std::vector<Eigen::Vector3f> lo_, hi_;  ///< object bounds in float
+  Eigen::Vector3f room_lo_, room_hi_;
+  float inv_texel_ = 1;
   std::vector<Eigen::Vector3f> centre_;  ///< bounding sphere per object
   std::vector<float> radius_;
 };
