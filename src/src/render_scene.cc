@@ -25,6 +25,20 @@ Status SceneParams::validate() const {
   return Status::Ok();
 }
 
+Status SceneParams::read(const Config& c, const std::string& prefix) {
+  int seed_i = static_cast<int>(seed);
+  for (Status st : {c.get(prefix + ".seed", &seed_i), c.get(prefix + ".wall_margin_m", &wall_margin_m),
+                    c.get(prefix + ".floor_margin_m", &floor_margin_m),
+                    c.get(prefix + ".ceiling_margin_m", &ceiling_margin_m),
+                    c.get(prefix + ".clearance_m", &clearance_m), c.get(prefix + ".num_objects", &num_objects),
+                    c.get(prefix + ".texel_m", &texel_m), c.get(prefix + ".poor_fraction", &poor_fraction),
+                    c.get(prefix + ".poor_walls", &poor_walls), c.get(prefix + ".photo_folder", &photo_folder)})
+    if (!st) return st;
+  if (seed_i < 0) return Error{prefix + ".seed must be >= 0 (" + c.origin() + ")"};
+  seed = static_cast<std::uint64_t>(seed_i);
+  return validate();
+}
+
 double distanceToBox(const Vec3& p, const Vec3& lo, const Vec3& hi) {
   const Vec3 d = (lo - p).cwiseMax(p - hi).cwiseMax(Vec3::Zero());
   return d.norm();

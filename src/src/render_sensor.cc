@@ -18,6 +18,16 @@ namespace {
 double unit(std::uint64_t h) { return static_cast<double>(h >> 11) * (1.0 / 9007199254740992.0); }
 }  // namespace
 
+Status SensorParams::read(const Config& c, const std::string& prefix) {
+  for (Status st : {c.get(prefix + ".noise_sigma", &noise_sigma), c.get(prefix + ".vignetting", &vignetting),
+                    c.get(prefix + ".drift_amplitude", &drift_amplitude),
+                    c.get(prefix + ".step_amplitude", &step_amplitude),
+                    c.get(prefix + ".step_period_s", &step_period_s),
+                    c.get(prefix + ".step_probability", &step_probability), c.get(prefix + ".noise", &noise)})
+    if (!st) return st;
+  return validate();
+}
+
 Status SensorParams::validate() const {
   if (!(noise_sigma >= 0 && noise_sigma < 50)) return Error{"sensor: noise_sigma must be in [0, 50)"};
   if (!(vignetting >= 0 && vignetting < 1)) return Error{"sensor: vignetting must be in [0, 1)"};

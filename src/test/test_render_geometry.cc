@@ -153,3 +153,21 @@ TEST(RenderGeometry, SensorGainStaysInRangeAndVaries) {
   EXPECT_LT(hi, 1.8);
   EXPECT_GT(hi / lo, 1.2);
 }
+
+TEST(RenderGeometry, ParamsReadAndValidate) {
+  auto c = Config::fromString("render:\n  scene:\n    clearance_m: 0.9\n    num_objects: 5\n"
+                              "  sensor:\n    noise_sigma: 3.5\n", "inline");
+  ASSERT_TRUE(c.ok()) << c.error();
+  SceneParams sp;
+  SensorParams sn;
+  ASSERT_TRUE(sp.read(*c));
+  ASSERT_TRUE(sn.read(*c));
+  EXPECT_EQ(sp.clearance_m, 0.9);
+  EXPECT_EQ(sp.num_objects, 5);
+  EXPECT_EQ(sn.noise_sigma, 3.5);
+  ASSERT_TRUE(c->applyOverride("render.scene.clearance_m=5"));
+  EXPECT_FALSE(sp.read(*c));  // clearance beyond the wall margin
+  ASSERT_TRUE(c->applyOverride("render.sensor.vignetting=1.5"));
+  EXPECT_FALSE(sn.read(*c));
+  EXPECT_FALSE(buildScene({}, SceneParams{}).ok());
+}

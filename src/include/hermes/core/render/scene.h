@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "hermes/core/config.h"
 #include "hermes/core/geometry.h"
 #include "hermes/core/render/texture.h"
 #include "hermes/core/status.h"
@@ -46,6 +47,8 @@ struct SceneParams {
   double poor_fraction = 0.25;      ///< share of near-uniform panels on rich faces
   bool poor_walls = true;           ///< make one wall and a few objects texture-poor
   std::string photo_folder;         ///< empty = PhotoLibrary::defaultFolder()
+  /// Reads keys under `prefix` (e.g. render.scene.clearance_m), then validates.
+  Status read(const Config& c, const std::string& prefix = "render.scene");
   Status validate() const;
 };
 

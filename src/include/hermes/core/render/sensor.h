@@ -7,6 +7,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "hermes/core/config.h"
 #include "hermes/core/status.h"
 
 namespace hermes {
@@ -20,6 +21,8 @@ struct SensorParams {
   double step_period_s = 9.0;     ///< one possible exposure step per period [s]
   double step_probability = 0.4;  ///< chance that a period holds a step
   bool noise = true;
+  /// Reads keys under `prefix` (e.g. render.sensor.noise_sigma), then validates.
+  Status read(const Config& c, const std::string& prefix = "render.sensor");
   Status validate() const;
 };
 
