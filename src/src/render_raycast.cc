@@ -32,22 +32,24 @@ inline int fastFloor(float x) {
 /// Bilinear sample of one mip level at continuous level-0 texel coordinates
 /// (x, y) (texel i covers [i, i+1)). cv::pyrDown centres level-L texel j on
 /// level-0 texel index 2^L j, i.e. continuous coordinate 2^L j + 0.5.
-inline float sampleLevel(const cv::Mat& m, float x, float y, float inv_scale) {
+template <class L>
+inline float sampleLevel(const L& m, float x, float y, float inv_scale) {
   const float fx = (x - 0.5f) * inv_scale, fy = (y - 0.5f) * inv_scale;
   int x0 = fastFloor(fx), y0 = fastFloor(fy);
   const float ax = fx - x0, ay = fy - y0;
   int x1 = x0 + 1, y1 = y0 + 1;
-  const int wm = m.cols - 1, hm = m.rows - 1;
+  const int wm = m.w - 1, hm = m.h - 1;
   x0 = std::clamp(x0, 0, wm);
   x1 = std::clamp(x1, 0, wm);
   y0 = std::clamp(y0, 0, hm);
   y1 = std::clamp(y1, 0, hm);
-  const std::uint8_t* r0 = m.ptr<std::uint8_t>(y0);
-  const std::uint8_t* r1 = m.ptr<std::uint8_t>(y1);
+  const std::uint8_t* r0 = m.data + y0 * m.step;
+  const std::uint8_t* r1 = m.data + y1 * m.step;
   const float top = r0[x0] + ax * (r0[x1] - r0[x0]);
   const float bot = r1[x0] + ax * (r1[x1] - r1[x0]);
   return top + ay * (bot - top);
 }
+
 }  // namespace
 
 // ---------------------------------------------------------------- RayGrid
@@ -124,6 +126,11 @@ struct Raycaster::Hit {
 };
 
 Raycaster::Raycaster(const Scene& scene, RayGrid rays) : scene_(scene), rays_(std::move(rays)) {
+  for (const MipTexture& t : scene_.textures) {
+    levels_.emplace_back();
+    for (const cv::Mat& m : t.levels)
+      levels_.back().push_back(Level{m.ptr<std::uint8_t>(), m.cols, m.rows, m.step[0]});
+  }
   room_lo_ = scene_.room.lo.cast<float>();
   room_hi_ = scene_.room.hi.cast<float>();
   inv_texel_ = static_cast<float>(1.0 / scene_.texel_m);
@@ -187,7 +194,7 @@ float Raycaster::shade(const Eigen::Vector3f& o, const Eigen::Vector3f& d, const
   const SceneBox& b = hit.box < 0 ? scene_.room : scene_.objects[hit.box];
   const int tex_id = b.texture[hit.face];
   if (tex_id < 0) return 0.0f;
-  const MipTexture& tex = scene_.textures[tex_id];
+  const std::vector<Level>& tex = levels_[tex_id];
   const int a = hit.face / 2, ua = (a + 1) % 3, va = (a + 2) % 3;
   const float inv_texel = inv_texel_;
   const Eigen::Vector3f p = o + hit.t * d;
@@ -202,24 +209,25 @@ float Raycaster::shade(const Eigen::Vector3f& o, const Eigen::Vector3f& d, const
   // Light: faces seen from inside the room face the opposite way of objects' faces.
   const int lf = hit.box < 0 ? (hit.face ^ 1) : hit.face;
   const float light = kFaceLight[lf];
-  const int nlev = static_cast<int>(tex.levels.size());
-  if (lod_raw <= 0.0f) return light * sampleLevel(tex.levels[0], x, y, 1.0f);
+  const int nlev = static_cast<int>(tex.size());
+  if (lod_raw <= 0.0f) return light * sampleLevel(tex[0], x, y, 1.0f);
   const float lod = std::min(lod_raw, static_cast<float>(nlev - 1));
   const int l0 = std::min(static_cast<int>(lod), nlev - 1);
   const int l1 = std::min(l0 + 1, nlev - 1);
   const float f = lod - l0;
-  const float s0 = sampleLevel(tex.levels[l0], x, y, 1.0f / static_cast<float>(1 << l0));
+  const float s0 = sampleLevel(tex[l0], x, y, 1.0f / static_cast<float>(1 << l0));
   if (f < 1e-3f || l1 == l0) return light * s0;
-  const float s1 = sampleLevel(tex.levels[l1], x, y, 1.0f / static_cast<float>(1 << l1));
+  const float s1 = sampleLevel(tex[l1], x, y, 1.0f / static_cast<float>(1 << l1));
   return light * (s0 + f * (s1 - s0));
 }
 
 void Raycaster::render(const SE3& T_W_C, RenderOutput* out, bool want_depth, bool want_face) const {
   const int w = rays_.w_, h = rays_.h_;
   out->radiance.create(h, w, CV_32F);
-  cv::Mat face(h, w, CV_32S);
-  cv::Mat depth;
-  if (want_depth) depth.create(h, w, CV_32F);
+  out->face.create(h, w, CV_32S);  // always filled: the edge pass needs it
+  cv::Mat& face = out->face;
+  if (want_depth) out->depth.create(h, w, CV_32F);
+  cv::Mat& depth = out->depth;
   const Eigen::Matrix3f R = T_W_C.rotation().cast<float>();
   const Eigen::Vector3f o = T_W_C.translation().cast<float>();
   const int nobj = static_cast<int>(scene_.objects.size());
@@ -274,7 +282,9 @@ void Raycaster::render(const SE3& T_W_C, RenderOutput* out, bool want_depth, boo
     const auto& r11 = rays_.ray_[static_cast<std::size_t>(v0 + 1) * w + u0 + 1];
     return Eigen::Vector3f((1 - b) * ((1 - a) * r00 + a * r10) + b * ((1 - a) * r01 + a * r11));
   };
-  cv::Mat edge = cv::Mat::zeros(h, w, CV_8U);
+  out->scratch.create(h, w, CV_8U);
+  out->scratch.setTo(0);
+  cv::Mat& edge = out->scratch;
   for (int v = 0; v < h; ++v) {
     const int* f0 = face.ptr<int>(v);
     const int* f1 = v + 1 < h ? face.ptr<int>(v + 1) : nullptr;
@@ -298,8 +308,7 @@ void Raycaster::render(const SE3& T_W_C, RenderOutput* out, bool want_depth, boo
       }
       out->radiance.at<float>(v, u) = 0.25f * acc;
     }
-  if (want_depth) out->depth = depth;
-  if (want_face) out->face = face;
+  (void)want_face;
 }
 
 }  // namespace render

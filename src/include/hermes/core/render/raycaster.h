@@ -3,6 +3,7 @@
 // output is the real distorted image); per frame they are only rotated.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include <Eigen/Core>
@@ -49,13 +50,14 @@ class RayGrid {
 /// box 0 = room, -1 = no hit).
 struct RenderOutput {
   cv::Mat radiance, depth, face;
+  cv::Mat scratch;  ///< internal edge mask, reused between renders
 };
 
 class Raycaster {
  public:
   Raycaster(const Scene& scene, RayGrid rays);
-  /// Renders the scene seen by a camera at T_W_C. Depth/face are filled only
-  /// when the pointers are requested (want_depth / want_face).
+  /// Renders the scene seen by a camera at T_W_C. Depth is filled when want_depth;
+  /// the face map is always filled (want_face kept for clarity).
   void render(const SE3& T_W_C, RenderOutput* out, bool want_depth = false,
               bool want_face = false) const;
   const RayGrid& rays() const { return rays_; }
@@ -69,6 +71,12 @@ class Raycaster {
 
   const Scene& scene_;
   RayGrid rays_;
+  struct Level {
+    const std::uint8_t* data;
+    int w, h;
+    std::size_t step;
+  };
+  std::vector<std::vector<Level>> levels_;  ///< raw view of every texture's mip levels
   std::vector<Eigen::Vector3f> lo_, hi_;  ///< object bounds in float
   Eigen::Vector3f room_lo_, room_hi_;
   float inv_texel_ = 1;
