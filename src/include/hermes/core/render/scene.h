@@ -1,0 +1,69 @@
+// Procedural scenes of the synthetic renderer: a hall (axis-aligned box seen
+// from inside) around a set of camera paths, with axis-aligned boxes (pillars,
+// crates, thin panels) inside that keep a clearance from every camera position.
+// Every face is a textured planar quad.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hermes/core/config.h"
+#include "hermes/core/geometry.h"
+#include "hermes/core/render/texture.h"
+#include "hermes/core/status.h"
+
+namespace hermes {
+namespace render {
+
+/// Axis-aligned box. The room box is seen from inside, objects from outside.
+/// Face f = 2*axis + (0 for the low side, 1 for the high side).
+struct SceneBox {
+  Vec3 lo = Vec3::Zero(), hi = Vec3::Zero();
+  std::string kind;                 ///< "room", "pillar", "crate", "panel", "marker"
+  std::array<int, 6> texture{};     ///< index into Scene::textures per face, -1 = none
+};
+
+struct Scene {
+  std::uint64_t seed = 0;
+  double texel_m = 1.0 / 128.0;     ///< texture resolution [m per texel]
+  SceneBox room;
+  std::vector<SceneBox> objects;
+  std::vector<MipTexture> textures;
+  std::vector<TextureStyle> texture_styles;
+  std::vector<std::string> photo_names;  ///< photographs available when built
+  std::string photo_folder;
+};
+
+struct SceneParams {
+  std::uint64_t seed = 1;
+  double wall_margin_m = 3.0;       ///< walls this far beyond the camera positions (xy)
+  double floor_margin_m = 1.0;      ///< floor below the lowest camera position
+  double ceiling_margin_m = 3.0;    ///< ceiling above the highest camera position
+  double clearance_m = 0.7;         ///< objects keep this distance to every camera position
+  int num_objects = 14;             ///< attempted inner objects
+  double texel_m = 1.0 / 128.0;     ///< [m per texel]
+  double poor_fraction = 0.25;      ///< share of near-uniform panels on rich faces
+  bool poor_walls = true;           ///< make one wall and a few objects texture-poor
+  std::string photo_folder;         ///< empty = PhotoLibrary::defaultFolder()
+  /// Reads keys under `prefix` (e.g. render.scene.clearance_m), then validates.
+  Status read(const Config& c, const std::string& prefix = "render.scene");
+  Status validate() const;
+};
+
+/// Builds the scene enclosing every given camera position (world frame).
+Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const SceneParams& p);
+
+/// Distance from p to the closed box [lo, hi] (0 inside).
+double distanceToBox(const Vec3& p, const Vec3& lo, const Vec3& hi);
+
+/// Clearance of a camera position: distance to the nearest face of the scene
+/// (room walls from inside, objects from outside; negative when inside an object).
+double clearance(const Scene& s, const Vec3& p);
+
+/// JSON description (seed, bounds, boxes, textures, photos) for reproduction.
+std::string sceneToJson(const Scene& s);
+
+}  // namespace render
+}  // namespace hermes

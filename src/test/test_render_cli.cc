@@ -1,0 +1,123 @@
+// hermes_sim end to end: ~1 s of MH_01 at a low rate and resolution into a temp
+// dir, EuRoC and TUM layouts present and parseable; bad arguments exit with 2.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <yaml-cpp/yaml.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+std::string simBinary() {
+  return (fs::read_symlink("/proc/self/exe").parent_path().parent_path() / "bin" / "hermes_sim").string();
+}
+const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_01_easy.txt";
+
+int run(const std::string& args) {
+  const int rc = std::system((simBinary() + " " + args + " 2>/dev/null").c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+std::vector<std::string> lines(const std::string& path) {
+  std::ifstream f(path);
+  std::vector<std::string> out;
+  for (std::string l; std::getline(f, l);)
+    if (!l.empty() && l[0] != '#') out.push_back(l);
+  return out;
+}
+}  // namespace
+
+TEST(RenderCli, EurocLayout) {
+  ASSERT_TRUE(fs::exists(simBinary())) << "build hermes_sim first: " << simBinary();
+  const std::string out = ::testing::TempDir() + "/render_cli_euroc";
+  fs::remove_all(out);
+  ASSERT_EQ(run("--trajectory " + kGt + " --out " + out + " --duration 1 --rate 4 --width 188 --height 120"), 0);
+  const std::string mav = out + "/MH_01_easy/mav0";
+  EXPECT_TRUE(fs::exists(out + "/scene.json"));
+  EXPECT_TRUE(fs::exists(mav + "/body.yaml"));
+  for (const std::string cam : {"cam0", "cam1"}) {
+    const auto rows = lines(mav + "/" + cam + "/data.csv");
+    ASSERT_EQ(rows.size(), 4u) << cam;
+    for (const std::string& r : rows) {
+      const auto comma = r.find(',');
+      ASSERT_NE(comma, std::string::npos);
+      EXPECT_EQ(r.substr(comma + 1), r.substr(0, comma) + ".png");
+      const cv::Mat img = cv::imread(mav + "/" + cam + "/data/" + r.substr(comma + 1), cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(img.empty());
+      EXPECT_EQ(img.type(), CV_8UC1);
+      EXPECT_EQ(img.cols, 188);
+      EXPECT_EQ(img.rows, 120);
+    }
+    std::ifstream y(mav + "/" + cam + "/sensor.yaml");
+    std::string first;
+    std::getline(y, first);
+    EXPECT_EQ(first, "%YAML:1.0");
+    cv::FileStorage fsr(mav + "/" + cam + "/sensor.yaml", cv::FileStorage::READ);
+    ASSERT_TRUE(fsr.isOpened());
+    std::vector<double> intr, dist, T;
+    fsr["intrinsics"] >> intr;
+    fsr["distortion_coefficients"] >> dist;
+    fsr["T_BS"]["data"] >> T;
+    ASSERT_EQ(intr.size(), 4u);
+    ASSERT_EQ(dist.size(), 4u);
+    ASSERT_EQ(T.size(), 16u);
+    EXPECT_NEAR(intr[0], cam == "cam0" ? 458.654 / 4 : 457.587 / 4, 1e-6);
+    EXPECT_NEAR(dist[0], cam == "cam0" ? -0.28340811 : -0.28368365, 1e-9);
+  }
+  const auto gt = lines(mav + "/state_groundtruth_estimate0/data.csv");
+  ASSERT_EQ(gt.size(), 4u);
+  std::stringstream ss(gt[0]);
+  std::vector<double> v;
+  for (std::string c; std::getline(ss, c, ',');) v.push_back(std::stod(c));
+  ASSERT_EQ(v.size(), 17u);
+  EXPECT_NEAR(v[1], 4.688319, 1e-6);  // first MH_01 pose, start offset 0
+  EXPECT_NEAR(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7], 1.0, 1e-6);
+}
+
+TEST(RenderCli, TumLayoutAndDeterminism) {
+  const std::string a = ::testing::TempDir() + "/render_cli_tum_a";
+  const std::string b = ::testing::TempDir() + "/render_cli_tum_b";
+  fs::remove_all(a);
+  fs::remove_all(b);
+  const std::string args = "--trajectory " + kGt + " --format tum --start 30 --duration 0.5 --rate 4 --width 160 --height 120 --out ";
+  ASSERT_EQ(run(args + a), 0);
+  ASSERT_EQ(run(args + b), 0);
+  const YAML::Node cam = YAML::LoadFile(a + "/MH_01_easy/camera.yaml");
+  for (const char* k : {"fx", "fy", "cx", "cy", "width", "height", "depth_scale"}) EXPECT_TRUE(cam[k]) << k;
+  EXPECT_EQ(cam["depth_scale"].as<double>(), 5000.0);
+  const auto rgb = lines(a + "/MH_01_easy/rgb.txt"), depth = lines(a + "/MH_01_easy/depth.txt");
+  const auto gt = lines(a + "/MH_01_easy/groundtruth.txt");
+  ASSERT_EQ(rgb.size(), 2u);
+  ASSERT_EQ(depth.size(), 2u);
+  ASSERT_EQ(gt.size(), 2u);
+  const std::string dfile = depth[0].substr(depth[0].find(' ') + 1);
+  const cv::Mat d = cv::imread(a + "/MH_01_easy/" + dfile, cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(d.type(), CV_16UC1);
+  double mn, mx;
+  cv::minMaxLoc(d, &mn, &mx);
+  EXPECT_GT(mn, 0.3 * 5000);  // every pixel hits geometry beyond the clearance
+  for (const std::string& f : {rgb[1].substr(rgb[1].find(' ') + 1), dfile}) {
+    const cv::Mat ia = cv::imread(a + "/MH_01_easy/" + f, cv::IMREAD_UNCHANGED);
+    const cv::Mat ib = cv::imread(b + "/MH_01_easy/" + f, cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(ia.empty());
+    EXPECT_EQ(cv::norm(ia, ib, cv::NORM_INF), 0.0) << f;
+  }
+}
+
+TEST(RenderCli, BadArgumentsExitTwo) {
+  EXPECT_EQ(run("--out /tmp/x"), 2);
+  EXPECT_EQ(run("--trajectory /nonexistent.txt --out /tmp/x"), 2);
+  EXPECT_EQ(run("--trajectory " + kGt + " --out /tmp/x --rate abc"), 2);
+  EXPECT_EQ(run("--trajectory " + kGt + " --out /tmp/x --format png"), 2);
+  EXPECT_EQ(run("--bogus"), 2);
+  EXPECT_EQ(run("--help"), 0);
+}
