@@ -29,8 +29,9 @@ Vec3 logSO3(const Mat3& R) {
 }
 
 double rotationAngle(const Mat3& R) {
-  const double c = std::clamp((R.trace() - 1.0) * 0.5, -1.0, 1.0);
-  return std::acos(c);
+  // 2 atan2(|v|, |w|) of the quaternion resolves tiny angles, unlike acos(trace).
+  const Quat q(R);
+  return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w()));
 }
 
 namespace {

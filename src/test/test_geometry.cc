@@ -39,3 +39,8 @@ TEST(Geometry, LogNearPi) {
   EXPECT_NEAR(logSO3(expSO3(w)).norm(), M_PI, 1e-6);
   EXPECT_NEAR(rotationAngle(expSO3(Vec3(0.3, 0, 0))), 0.3, 1e-12);
 }
+
+TEST(Geometry, RotationAngleResolvesTinyAngles) {
+  EXPECT_NEAR(rotationAngle(expSO3(Vec3(1e-9, 0, 0))), 1e-9, 1e-15);
+  EXPECT_NEAR(rotationAngle(expSO3(Vec3(0, 2.5, 0))), 2.5, 1e-12);
+}
