@@ -61,7 +61,7 @@ done
 if [[ -x /usr/bin/python3 && -f "$ROOT/scripts/plot_trajectories.py" ]]; then
   PLOT_ARGS=()
   for seq in MH_01_easy MH_02_easy MH_03_medium; do
-    PLOT_ARGS+=(--gt "$GT_DIR/$seq.txt" --est "$CACHE/$KEY/$seq" --label "$seq")
+    PLOT_ARGS+=(--gt "$GT_DIR/$seq.txt" --est "$CACHE/$KEY/$seq/mav0/state_groundtruth_estimate0/data.csv" --name "$seq")
   done
   /usr/bin/python3 "$ROOT/scripts/plot_trajectories.py" "${PLOT_ARGS[@]}" --out "$OUT/trajectories.png" \
     || echo "[demo] plotting failed (see above)"
