@@ -3,7 +3,7 @@
 // ground-truth trajectories sharing one hall. Prints JSON (also to --json FILE).
 //
 // Usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints 200]
-//                            [--source REPO] [--data SHARED_DATA_DIR]
+//                            [--source REPO] [--data SHARED_DATA_DIR] [--set server.KEY=VALUE]
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -28,6 +28,7 @@ using namespace hermes;
 using namespace hermes::server;
 
 std::string g_source_dir, g_data_dir;
+ServerParams g_params;
 
 /// --source / --data, else the environment, else relative to this executable
 /// (<repo>/<build>/bin/hermes_bench_server), else /work/shared/data.
@@ -66,7 +67,7 @@ Expected<nlohmann::json> run(int n, int keypoints) {
   options.landmarks_per_keyframe = n > 3 ? 15 : 40;
   auto fx = fixture::makeFixture(specsFor(n), options);
   if (!fx) return Error{fx.error()};
-  auto server = Server::create(ServerParams{}, g_source_dir);
+  auto server = Server::create(g_params, g_source_dir);
   if (!server) return Error{server.error()};
   Server& s = **server;
   std::size_t rounds = 0, submaps = 0, keyframes = 0;
@@ -125,6 +126,7 @@ int main(int argc, char** argv) {
   std::string json_path;
   std::vector<int> counts = {3, 10};
   int keypoints = 200;
+  Config config;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--json" && i + 1 < argc) {
@@ -134,6 +136,11 @@ int main(int argc, char** argv) {
       std::stringstream ss(argv[++i]);
       std::string item;
       while (std::getline(ss, item, ',')) counts.push_back(std::atoi(item.c_str()));
+    } else if (a == "--set" && i + 1 < argc) {
+      if (Status st = config.applyOverride(argv[++i]); !st) {
+        std::cerr << "hermes_bench_server: " << st.error() << "\n";
+        return 2;
+      }
     } else if (a == "--source" && i + 1 < argc) {
       g_source_dir = argv[++i];
     } else if (a == "--data" && i + 1 < argc) {
@@ -141,11 +148,19 @@ int main(int argc, char** argv) {
     } else if (a == "--keypoints" && i + 1 < argc) {
       keypoints = std::atoi(argv[++i]);
     } else {
-      std::cerr << "usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints N] [--source REPO] [--data DIR]\n";
+      std::cerr << "usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints N] [--source REPO] [--data DIR] [--set server.KEY=VALUE]\n";
       return 2;
     }
   }
   locateDirs(argv[0]);
+  if (Status st = g_params.read(config); !st) {
+    std::cerr << "hermes_bench_server: " << st.error() << "\n";
+    return 2;
+  }
+  if (!config.unusedKeys().empty()) {
+    std::cerr << "hermes_bench_server: unknown key " << config.unusedKeys().front() << "\n";
+    return 2;
+  }
   nlohmann::json out;
   out["bench"] = "server";
   out["runs"] = nlohmann::json::array();
