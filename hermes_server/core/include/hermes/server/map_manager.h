@@ -1,0 +1,106 @@
+// Merging of submaps into the global map (DESIGN.md §5): store keyframes and
+// landmarks under (agent, session, id), keep per-trajectory odometry chains,
+// BoW place recognition per new keyframe, rig-based 17-point loop closure for
+// the candidates, PCM over all loops, anchoring of agents tied to the world by
+// accepted loops, world selection, pose-graph optimisation.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "hermes/core/config.h"
+#include "hermes/core/metrics.h"
+#include "hermes/server/bookkeeper.h"
+#include "hermes/server/global_map.h"
+#include "hermes/server/loop_closure.h"
+#include "hermes/server/pcm.h"
+#include "hermes/server/place_recognition.h"
+#include "hermes/server/pose_graph.h"
+
+namespace hermes {
+namespace server {
+
+struct MapManagerParams {
+  PlaceRecognitionParams place_recognition;  ///< server.place_recognition.*
+  LoopClosureParams loop_closure;            ///< server.loop_closure.*
+  PcmParams pcm;                             ///< server.pcm.*
+  PoseGraphParams pose_graph;                ///< server.pose_graph.*
+  // server.map.*
+  int rig_neighbours = 2;              ///< m neighbours per rig side
+  int max_candidates_per_keyframe = 1; ///< place candidates verified per keyframe
+  int optimize_every_submaps = 10;     ///< also optimise after this many merges (0 = only on new loops)
+  double odometry_sigma_m = 0.01;      ///< odometry between submaps (no edge sent) [m]
+  double odometry_sigma_rad = 0.005;   ///< same, rotation [rad]
+  int min_world_loops = 3;             ///< accepted loops needed to anchor an agent
+
+  MapManagerParams() { pcm.min_clique_size = 3; }
+  Status read(const Config& config, const std::string& prefix = "server.");
+  Status validate() const;
+};
+
+struct MergeStats {
+  int keyframes = 0, landmarks = 0;
+  int place_candidates = 0;
+  int loops_attempted = 0, loops_geometric = 0;
+  bool optimized = false;
+};
+
+class MapManager {
+ public:
+  /// Test hooks: rewrite place candidates, or a loop result before PCM.
+  using CandidateHook = std::function<void(const KeyframeKey& query, std::vector<PlaceCandidate>*)>;
+  using LoopHook = std::function<void(const KeyframeKey& a, const KeyframeKey& b, SE3* T_a_b)>;
+
+  MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerParams params,
+             Bookkeeper* bookkeeper);
+
+  /// Merges one accepted submap of `robot`. Errors name the submap; the map is
+  /// left consistent (keyframes already stored stay).
+  Expected<MergeStats> merge(RobotId robot, const Submap& submap,
+                             const std::function<double(RobotId)>& credibility = nullptr);
+
+  /// Optimises the pose graph of the anchored trajectories now.
+  Status optimize();
+
+  const GlobalMap& map() const { return map_; }
+  const TimingStats& timings() const { return timings_; }
+  std::size_t loopsAccepted() const;
+  std::size_t loopsRejected() const;
+  bool hasLoops(RobotId robot) const;
+  /// Agents (current sessions) anchored in the world frame.
+  int agentsMerged() const;
+  void setCandidateHook(CandidateHook h) { candidate_hook_ = std::move(h); }
+  void setLoopHook(LoopHook h) { loop_hook_ = std::move(h); }
+
+ private:
+  void storeSubmap(RobotId robot, const Submap& submap, std::vector<KeyframeKey>* added);
+  std::vector<const Keyframe*> neighbours(const KeyframeKey& key, std::vector<PinholeIntrinsics>* cams) const;
+  void detectLoops(const KeyframeKey& key, MergeStats* stats);
+  void runPcm();
+  bool updateAnchoring(const std::function<double(RobotId)>& credibility);
+  void anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A);
+  Mat6 defaultOdometryInformation() const;
+
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  MapManagerParams params_;
+  Bookkeeper* bookkeeper_;
+  PlaceRecognizer recognizer_;
+  LoopCloser closer_;
+  OdometryChain chain_;
+  GlobalMap map_;
+  TimingStats timings_;
+  std::uint64_t next_loop_id_ = 0;
+  int merges_since_optimize_ = 0;
+  bool graph_dirty_ = false;
+  std::set<std::uint64_t> accepted_;
+  std::optional<TrajectoryId> world_traj_;
+  CandidateHook candidate_hook_;
+  LoopHook loop_hook_;
+};
+
+}  // namespace server
+}  // namespace hermes

@@ -1,0 +1,76 @@
+// The ROS-free edge server pipeline (DESIGN.md §5): one door for frames
+// (decode, dedup, bookkeeping via SubmapReceiver), a credibility-ordered queue
+// of accepted submaps, and the MapManager that merges them.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+
+#include "hermes/core/config.h"
+#include "hermes/core/metrics.h"
+#include "hermes/server/bookkeeper.h"
+#include "hermes/server/credibility.h"
+#include "hermes/server/map_manager.h"
+#include "hermes/server/submap_receiver.h"
+
+namespace hermes {
+namespace server {
+
+struct ServerParams {
+  BookkeeperParams bookkeeper;    ///< server.bookkeeper.*
+  CredibilityParams credibility;  ///< server.csa, server.w_ts, ...
+  MapManagerParams map;           ///< server.place_recognition.*, server.loop_closure.*, ...
+  Status read(const Config& config, const std::string& prefix = "server.");
+  Status validate() const;
+};
+
+struct ServerCounters {
+  std::size_t merged = 0;
+  std::size_t merge_errors = 0;
+  std::string last_error;
+};
+
+class Server {
+ public:
+  /// Loads the vocabulary (relative paths resolved against base_dir).
+  static Expected<std::unique_ptr<Server>> create(const ServerParams& params,
+                                                  const std::string& base_dir);
+  Server(const ServerParams& params, std::shared_ptr<const Vocabulary> vocabulary);
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  /// One received frame (claimed: routing header from the transport, may be null).
+  ReceiveResult onFrame(const std::uint8_t* data, std::size_t size, const SubmapHeader* claimed,
+                        double now);
+  /// Pops up to max_submaps (< 0: all) in credibility order and merges them.
+  /// Returns how many were merged.
+  int process(double now, int max_submaps = -1);
+
+  std::size_t pending() const { return queue_.size(); }
+  const Bookkeeper& bookkeeper() const { return bookkeeper_; }
+  const CredibilityAssessor& credibility() const { return queue_; }
+  const MapManager& mapManager() const { return map_; }
+  MapManager& mapManager() { return map_; }
+  const GlobalMap& map() const { return map_.map(); }
+  const ReceiverStats& receiverStats() const { return receiver_.stats(); }
+  const ServerCounters& counters() const { return counters_; }
+  /// Map-manager stages plus "submap" (whole merge incl. queue handling) [ms].
+  TimingStats timings() const;
+  const ServerParams& params() const { return params_; }
+
+ private:
+  ServerParams params_;
+  Bookkeeper bookkeeper_;
+  CredibilityAssessor queue_;
+  MapManager map_;
+  SubmapReceiver receiver_;
+  std::map<std::uint64_t, ReceivedSubmap> stored_;
+  std::uint64_t next_handle_ = 0;
+  ServerCounters counters_;
+  TimingStats timings_;
+};
+
+}  // namespace server
+}  // namespace hermes

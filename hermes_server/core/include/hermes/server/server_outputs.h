@@ -1,0 +1,36 @@
+// Server outputs (DESIGN.md §5, §7): per-agent merged trajectories (TUM, world
+// frame), the global map's landmarks as PLY, and the metrics fragment.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hermes/core/metrics.h"
+#include "hermes/core/trajectory.h"
+#include "hermes/server/server.h"
+
+namespace hermes {
+namespace server {
+
+/// Keyframe poses of `agent` (all its anchored sessions) in the world frame,
+/// sorted by stamp: T_W_C, or T_W_B = T_W_C * T_B_C^-1 when T_B_C is given.
+Trajectory agentTrajectory(const GlobalMap& map, std::uint32_t agent,
+                           const std::optional<SE3>& T_B_C = std::nullopt);
+
+/// Writes <dir>/agent_<robot>.tum for every anchored agent; returns the paths.
+Expected<std::vector<std::string>> writeAgentTrajectories(
+    const GlobalMap& map, const std::string& dir, const std::map<std::uint32_t, SE3>& T_B_C = {});
+
+/// PLY point cloud (x y z as float), ascii or binary little endian.
+Status writePly(const std::string& path, const std::vector<Vec3>& points, bool binary);
+/// Reads back what writePly wrote (either format).
+Expected<std::vector<Vec3>> readPly(const std::string& path);
+
+/// The server's share of the metrics JSON: loops_accepted, loops_rejected,
+/// agents_merged, timings_ms; per_agent with keyframes/landmarks/bytes/submaps.
+RunMetrics serverMetrics(const Server& server);
+
+}  // namespace server
+}  // namespace hermes

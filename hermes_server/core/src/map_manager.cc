@@ -1,0 +1,354 @@
+#include "hermes/server/map_manager.h"
+
+#include <algorithm>
+#include <chrono>
+
+namespace hermes {
+namespace server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+KeyframeKey keyOf(const TrajectoryMap& t, KeyframeId id) {
+  return KeyframeKey{t.agent, t.session, id};
+}
+
+}  // namespace
+
+Status MapManagerParams::read(const Config& config, const std::string& prefix) {
+  for (Status s : {place_recognition.read(config, prefix + "place_recognition."),
+                   loop_closure.read(config, prefix + "loop_closure"),
+                   pcm.read(config, prefix + "pcm"), pose_graph.read(config, prefix + "pose_graph")})
+    if (!s) return s;
+  const std::string p = prefix + "map.";
+  struct IntKey { const char* name; int* v; };
+  for (IntKey k : {IntKey{"rig_neighbours", &rig_neighbours},
+                   IntKey{"max_candidates_per_keyframe", &max_candidates_per_keyframe},
+                   IntKey{"optimize_every_submaps", &optimize_every_submaps},
+                   IntKey{"min_world_loops", &min_world_loops}})
+    if (config.has(p + k.name))
+      if (Status s = config.get(p + k.name, k.v); !s) return s;
+  if (config.has(p + "odometry_sigma_m"))
+    if (Status s = config.get(p + "odometry_sigma_m", &odometry_sigma_m); !s) return s;
+  if (config.has(p + "odometry_sigma_rad"))
+    if (Status s = config.get(p + "odometry_sigma_rad", &odometry_sigma_rad); !s) return s;
+  if (Status s = validate(); !s) return Error{p + ": " + s.error()};
+  return Status::Ok();
+}
+
+Status MapManagerParams::validate() const {
+  if (rig_neighbours < 1) return Error{"rig_neighbours must be >= 1"};
+  if (max_candidates_per_keyframe < 0) return Error{"max_candidates_per_keyframe must be >= 0"};
+  if (optimize_every_submaps < 0) return Error{"optimize_every_submaps must be >= 0"};
+  if (!(odometry_sigma_m > 0) || !(odometry_sigma_rad > 0))
+    return Error{"odometry sigmas must be > 0"};
+  if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
+  return Status::Ok();
+}
+
+MapManager::MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerParams params,
+                       Bookkeeper* bookkeeper)
+    : vocabulary_(std::move(vocabulary)),
+      params_(std::move(params)),
+      bookkeeper_(bookkeeper),
+      recognizer_(vocabulary_, params_.place_recognition),
+      closer_(params_.loop_closure) {}
+
+Mat6 MapManager::defaultOdometryInformation() const {
+  Mat6 info = Mat6::Zero();
+  info.diagonal().head<3>().setConstant(1.0 / (params_.odometry_sigma_m * params_.odometry_sigma_m));
+  info.diagonal().tail<3>().setConstant(1.0 /
+                                        (params_.odometry_sigma_rad * params_.odometry_sigma_rad));
+  return info;
+}
+
+void MapManager::storeSubmap(RobotId robot, const Submap& submap,
+                             std::vector<KeyframeKey>* added) {
+  const std::uint32_t session = submap.header.session;
+  TrajectoryMap& t = map_.trajectories[{robot, session}];
+  t.agent = robot;
+  t.session = session;
+  t.uuid = submap.header.agent;
+  for (const OdometryEdge& e : submap.odometry) t.odometry[{e.from, e.to}] = e;
+  std::vector<const Keyframe*> order;
+  for (const Keyframe& kf : submap.keyframes)
+    if (!t.keyframes.count(kf.id)) order.push_back(&kf);
+  std::sort(order.begin(), order.end(),
+            [](const Keyframe* a, const Keyframe* b) { return a->id < b->id; });
+  for (const Keyframe* kf : order) {
+    StoredKeyframe sk;
+    sk.keyframe = *kf;
+    sk.camera = submap.cameras[kf->camera_id];
+    auto next = t.keyframes.lower_bound(kf->id);
+    if (t.anchored) {
+      // Follow the correction of the closest earlier keyframe (after optimisation).
+      SE3 T_W_A = t.T_W_A;
+      if (next != t.keyframes.begin()) {
+        const StoredKeyframe& prev = std::prev(next)->second;
+        T_W_A = prev.T_W_C * prev.keyframe.T_A_C.inverse();
+      }
+      sk.T_W_C = T_W_A * kf->T_A_C;
+    }
+    const bool last = next == t.keyframes.end();
+    const KeyframeKey key = keyOf(t, kf->id);
+    t.keyframes[kf->id] = std::move(sk);
+    if (chain_.addKeyframe(key, kf->T_A_C) && last && t.keyframes.size() > 1) {
+      const KeyframeId prev_id = std::prev(t.keyframes.find(kf->id))->first;
+      auto e = t.odometry.find({prev_id, kf->id});
+      const Mat6 info = e != t.odometry.end() ? e->second.information : defaultOdometryInformation();
+      (void)chain_.addEdge(keyOf(t, prev_id), key, info);
+    }
+    added->push_back(key);
+  }
+  for (const Landmark& lm : submap.landmarks) {
+    auto it = t.landmarks.find(lm.id);
+    if (it == t.landmarks.end()) {
+      StoredLandmark sl;
+      sl.landmark = lm;
+      GlobalMap::anchorLandmark(t, &sl);
+      t.landmarks[lm.id] = std::move(sl);
+    } else {
+      auto& obs = it->second.landmark.observations;
+      obs.insert(obs.end(), lm.observations.begin(), lm.observations.end());
+      if (it->second.anchor == kInvalidId) GlobalMap::anchorLandmark(t, &it->second);
+    }
+  }
+}
+
+std::vector<const Keyframe*> MapManager::neighbours(const KeyframeKey& key,
+                                                    std::vector<PinholeIntrinsics>* cams) const {
+  std::vector<const Keyframe*> out;
+  const TrajectoryMap* t = map_.trajectory(key.agent, key.session);
+  if (!t) return out;
+  auto self = t->keyframes.find(key.id);
+  if (self == t->keyframes.end()) return out;
+  cams->push_back(self->second.camera);
+  // Earlier keyframes first, then later ones.
+  auto it = self;
+  while (static_cast<int>(out.size()) < params_.rig_neighbours && it != t->keyframes.begin()) {
+    --it;
+    out.push_back(&it->second.keyframe);
+    cams->push_back(it->second.camera);
+  }
+  it = std::next(self);
+  while (static_cast<int>(out.size()) < params_.rig_neighbours && it != t->keyframes.end()) {
+    out.push_back(&it->second.keyframe);
+    cams->push_back(it->second.camera);
+    ++it;
+  }
+  return out;
+}
+
+void MapManager::detectLoops(const KeyframeKey& key, MergeStats* stats) {
+  const StoredKeyframe* q = map_.keyframe(key);
+  auto t0 = Clock::now();
+  const BowVector bow = recognizer_.bow(q->keyframe.descriptors);
+  PlaceQueryResult places = recognizer_.query(key, q->keyframe.stamp, bow);
+  (void)recognizer_.addBow(key, q->keyframe.stamp, bow);
+  timings_.add("place_recognition", msSince(t0));
+  if (candidate_hook_) candidate_hook_(key, &places.candidates);
+  stats->place_candidates += static_cast<int>(places.candidates.size());
+  std::vector<PinholeIntrinsics> qcams;
+  const std::vector<const Keyframe*> qn = neighbours(key, &qcams);
+  int tried = 0;
+  for (const PlaceCandidate& c : places.candidates) {
+    if (tried >= params_.max_candidates_per_keyframe) break;
+    const StoredKeyframe* ck = map_.keyframe(c.key);
+    if (!ck || c.key == key) continue;
+    ++tried;
+    ++stats->loops_attempted;
+    std::vector<PinholeIntrinsics> ccams;
+    const std::vector<const Keyframe*> cn = neighbours(c.key, &ccams);
+    t0 = Clock::now();
+    LoopClosureResult r = closer_.close(q->keyframe, qn, qcams, ck->keyframe, cn, ccams);
+    timings_.add("loop_closure", msSince(t0));
+    if (!r.ok()) continue;
+    ++stats->loops_geometric;
+    LoopEdge e;
+    e.id = next_loop_id_++;
+    e.a = key;
+    e.b = c.key;
+    e.T_a_b = r.T_refQ_refC;
+    if (loop_hook_) loop_hook_(e.a, e.b, &e.T_a_b);
+    e.information = r.information;
+    e.covariance = r.covariance;
+    map_.loops.push_back(e);
+  }
+}
+
+void MapManager::runPcm() {
+  std::vector<LoopCandidate> candidates;
+  for (const LoopEdge& e : map_.loops) {
+    LoopCandidate c;
+    c.id = e.id;
+    c.a = e.a;
+    c.b = e.b;
+    c.T_a_b = e.T_a_b;
+    c.covariance = e.covariance;
+    candidates.push_back(c);
+  }
+  const PcmResult r = selectConsistentLoops(candidates, chain_.query(), params_.pcm);
+  std::set<std::uint64_t> accepted(r.accepted.begin(), r.accepted.end());
+  for (LoopEdge& e : map_.loops) e.accepted = accepted.count(e.id) > 0;
+  if (accepted != accepted_) graph_dirty_ = true;
+  accepted_ = std::move(accepted);
+}
+
+void MapManager::anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A) {
+  t->anchored = true;
+  t->T_W_A = T_W_A;
+  for (auto& [id, kf] : t->keyframes) kf.T_W_C = T_W_A * kf.keyframe.T_A_C;
+  const AgentStats* s = bookkeeper_ ? bookkeeper_->stats(t->agent) : nullptr;
+  if (s && s->current_session == t->session && bookkeeper_->worldAgent() != t->agent)
+    (void)bookkeeper_->markAnchored(t->agent, T_W_A);
+  graph_dirty_ = true;
+}
+
+bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibility) {
+  if (!bookkeeper_) return false;
+  bool changed = false;
+  const auto world = bookkeeper_->selectWorld(credibility);
+  if (!world) return false;
+  const AgentStats* ws = bookkeeper_->stats(*world);
+  auto wt = map_.trajectories.find({*world, ws ? ws->current_session : 0});
+  if (wt != map_.trajectories.end() && !wt->second.anchored) {
+    anchorTrajectory(&wt->second, SE3::identity());
+    world_traj_ = wt->first;
+    changed = true;
+  }
+  for (bool progress = true; progress;) {
+    progress = false;
+    for (auto& [tid, t] : map_.trajectories) {
+      if (t.anchored) continue;
+      std::vector<SE3> estimates;
+      for (const LoopEdge& e : map_.loops) {
+        if (!e.accepted) continue;
+        const bool a_here = e.a.agent == t.agent && e.a.session == t.session;
+        const bool b_here = e.b.agent == t.agent && e.b.session == t.session;
+        if (a_here == b_here) continue;
+        const KeyframeKey other = a_here ? e.b : e.a;
+        const TrajectoryMap* ot = map_.trajectory(other.agent, other.session);
+        if (!ot || !ot->anchored) continue;
+        const StoredKeyframe* ok = map_.keyframe(other);
+        const StoredKeyframe* mine = map_.keyframe(a_here ? e.a : e.b);
+        const SE3 T_W_Cmine = a_here ? ok->T_W_C * e.T_a_b.inverse() : ok->T_W_C * e.T_a_b;
+        estimates.push_back(T_W_Cmine * mine->keyframe.T_A_C.inverse());
+      }
+      if (static_cast<int>(estimates.size()) < params_.min_world_loops) continue;
+      // Medoid of the estimates (robust to a residual bad loop).
+      std::size_t best = 0;
+      double best_cost = 1e300;
+      for (std::size_t i = 0; i < estimates.size(); ++i) {
+        double cost = 0;
+        for (const SE3& o : estimates)
+          cost += (o.translation() - estimates[i].translation()).norm() +
+                  rotationAngle((o.inverse() * estimates[i]).rotation());
+        if (cost < best_cost) best_cost = cost, best = i;
+      }
+      anchorTrajectory(&t, estimates[best]);
+      progress = changed = true;
+    }
+  }
+  return changed;
+}
+
+Status MapManager::optimize() {
+  PoseGraph graph(params_.pose_graph);
+  const Mat6 default_info = defaultOdometryInformation();
+  bool fixed = false;
+  for (const auto& [tid, t] : map_.trajectories) {
+    if (!t.anchored) continue;
+    const StoredKeyframe* prev = nullptr;
+    KeyframeId prev_id = kInvalidId;
+    for (const auto& [id, kf] : t.keyframes) {
+      const KeyframeKey key = keyOf(t, id);
+      if (Status s = graph.addNode(key, kf.T_W_C); !s) return s;
+      if (!fixed && world_traj_ && tid == *world_traj_) {
+        if (Status s = graph.setFixed(key); !s) return s;
+        fixed = true;
+      }
+      if (prev) {
+        auto e = t.odometry.find({prev_id, id});
+        const SE3 T = e != t.odometry.end() ? e->second.T_from_to
+                                            : prev->keyframe.T_A_C.inverse() * kf.keyframe.T_A_C;
+        const Mat6& info = e != t.odometry.end() ? e->second.information : default_info;
+        if (Status s = graph.addOdometryEdge(keyOf(t, prev_id), key, T, info); !s) return s;
+      }
+      prev = &kf;
+      prev_id = id;
+    }
+  }
+  if (!fixed) return Status::Ok();
+  for (const LoopEdge& e : map_.loops) {
+    if (!e.accepted || !graph.hasNode(e.a) || !graph.hasNode(e.b)) continue;
+    if (Status s = graph.addLoopEdge(e.a, e.b, e.T_a_b, e.information); !s) return s;
+  }
+  auto t0 = Clock::now();
+  auto r = graph.optimize();
+  timings_.add("pose_graph", msSince(t0));
+  if (!r) return Error{"pose graph: " + r.error()};
+  for (auto& [tid, t] : map_.trajectories) {
+    if (!t.anchored) continue;
+    for (auto& [id, kf] : t.keyframes) {
+      auto p = graph.pose(keyOf(t, id));
+      if (p) kf.T_W_C = *p;
+    }
+  }
+  graph_dirty_ = false;
+  merges_since_optimize_ = 0;
+  return Status::Ok();
+}
+
+Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
+                                       const std::function<double(RobotId)>& credibility) {
+  const auto t_total = Clock::now();
+  if (std::string v = submap.validate(); !v.empty())
+    return Error{"merge of submap seq " + std::to_string(submap.header.seq) + " from " +
+                 hermes::toString(submap.header.agent) + ": " + v};
+  MergeStats stats;
+  std::vector<KeyframeKey> added;
+  auto t0 = Clock::now();
+  storeSubmap(robot, submap, &added);
+  timings_.add("store", msSince(t0));
+  stats.keyframes = static_cast<int>(added.size());
+  stats.landmarks = static_cast<int>(submap.landmarks.size());
+  const std::size_t loops_before = map_.loops.size();
+  for (const KeyframeKey& key : added) detectLoops(key, &stats);
+  if (map_.loops.size() != loops_before) {
+    t0 = Clock::now();
+    runPcm();
+    timings_.add("pcm", msSince(t0));
+  }
+  updateAnchoring(credibility);
+  ++merges_since_optimize_;
+  if (graph_dirty_ || (params_.optimize_every_submaps > 0 &&
+                       merges_since_optimize_ >= params_.optimize_every_submaps)) {
+    if (Status s = optimize(); !s) return Error{s.error()};
+    stats.optimized = true;
+  }
+  timings_.add("merge_total", msSince(t_total));
+  return stats;
+}
+
+std::size_t MapManager::loopsAccepted() const { return accepted_.size(); }
+std::size_t MapManager::loopsRejected() const { return map_.loops.size() - accepted_.size(); }
+
+bool MapManager::hasLoops(RobotId robot) const {
+  for (const LoopEdge& e : map_.loops)
+    if (e.accepted && (e.a.agent == robot || e.b.agent == robot)) return true;
+  return false;
+}
+
+int MapManager::agentsMerged() const {
+  int n = 0;
+  if (!bookkeeper_) return 0;
+  for (RobotId r : bookkeeper_->robots())
+    if (bookkeeper_->anchored(r)) ++n;
+  return n;
+}
+
+}  // namespace server
+}  // namespace hermes

@@ -1,0 +1,183 @@
+// hermes_bench_server: processing time of the server pipeline per submap
+// (median / p95) and per stage, for 3 and 10 simulated agents on EuRoC
+// ground-truth trajectories sharing one hall. Prints JSON (also to --json FILE).
+//
+// Usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints 200]
+//                            [--source REPO] [--data SHARED_DATA_DIR] [--set server.KEY=VALUE]
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "hermes/core/evaluation.h"
+#include "hermes/server/server.h"
+#include "hermes/server/server_outputs.h"
+// The multi-agent fixture lives with the tests (tools cannot link the test
+// support library without a CMake change); compile it into this tool.
+#include "../test/support/multi_agent_fixture.cc"
+
+namespace {
+
+using namespace hermes;
+using namespace hermes::server;
+
+std::string g_source_dir, g_data_dir;
+ServerParams g_params;
+
+/// --source / --data, else the environment, else relative to this executable
+/// (<repo>/<build>/bin/hermes_bench_server), else /work/shared/data.
+void locateDirs(const char* argv0) {
+  std::error_code ec;
+  const auto exe = std::filesystem::canonical(std::filesystem::path(argv0), ec);
+  const auto repo = ec ? std::filesystem::path(".") : exe.parent_path().parent_path().parent_path();
+  if (g_source_dir.empty()) {
+    if (const char* env = std::getenv("HERMES_SOURCE_DIR")) g_source_dir = env;
+    else g_source_dir = repo.string();
+  }
+  if (g_data_dir.empty()) {
+    if (const char* env = std::getenv("HERMES_SHARED_DATA_DIR")) g_data_dir = env;
+    else if (std::filesystem::exists(repo.parent_path() / "shared/data/euroc_gt"))
+      g_data_dir = (repo.parent_path() / "shared/data").string();
+    else g_data_dir = "/work/shared/data";
+  }
+}
+
+std::vector<fixture::AgentSpec> specsFor(int n) {
+  const std::string gt = g_data_dir + "/euroc_gt/";
+  const char* files[3] = {"MH_01_easy.txt", "MH_02_easy.txt", "MH_03_medium.txt"};
+  const double ends[3] = {20.0, 21.0, 17.0};
+  std::vector<fixture::AgentSpec> specs;
+  for (int i = 0; i < n; ++i) {
+    const int f = i % 3;
+    const double shift = 1.0 * (i / 3);  // later agents start a little later
+    specs.push_back({gt + files[f], shift, ends[f] + shift * 0.2, -1});
+  }
+  return specs;
+}
+
+Expected<nlohmann::json> run(int n, int keypoints) {
+  fixture::Options options;
+  options.keypoints = keypoints;
+  options.landmarks_per_keyframe = n > 3 ? 15 : 40;
+  auto fx = fixture::makeFixture(specsFor(n), options);
+  if (!fx) return Error{fx.error()};
+  auto server = Server::create(g_params, g_source_dir);
+  if (!server) return Error{server.error()};
+  Server& s = **server;
+  std::size_t rounds = 0, submaps = 0, keyframes = 0;
+  for (const auto& a : fx->agents) {
+    rounds = std::max(rounds, a.frames.size());
+    submaps += a.frames.size();
+    keyframes += a.keyframes;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  double now = 0;
+  for (std::size_t r = 0; r < rounds; ++r) {
+    for (const auto& a : fx->agents) {
+      if (r >= a.frames.size()) continue;
+      now += 1.0;
+      s.onFrame(a.frames[r].data(), a.frames[r].size(), nullptr, now);
+    }
+    s.process(now, -1);
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  nlohmann::json j;
+  j["agents"] = n;
+  j["submaps"] = submaps;
+  j["keyframes"] = keyframes;
+  j["keypoints_per_keyframe"] = keypoints;
+  j["wall_s"] = wall;
+  j["merge_errors"] = s.counters().merge_errors;
+  j["loops_accepted"] = s.mapManager().loopsAccepted();
+  j["loops_rejected"] = s.mapManager().loopsRejected();
+  j["agents_merged"] = s.mapManager().agentsMerged();
+  nlohmann::json stages = nlohmann::json::object();
+  for (const auto& [name, st] : s.timings().summary()) {
+    stages[name] = {{"median_ms", st.median}, {"p95_ms", st.p95}, {"count", st.count}};
+    if (name == "submap") j["per_submap_ms"] = {{"median", st.median}, {"p95", st.p95}};
+  }
+  j["stages"] = stages;
+  std::vector<eval::AgentTrajectories> agents;
+  for (std::size_t i = 0; i < fx->agents.size(); ++i) {
+    const auto robot = s.bookkeeper().robotOf(fx->agents[i].uuid);
+    if (!robot) continue;
+    agents.push_back({"agent" + std::to_string(i), fx->agents[i].gt_body,
+                      agentTrajectory(s.map(), *robot, fx->T_B_C)});
+  }
+  eval::EvalParams ep;
+  ep.max_dt = 0.01;
+  auto ev = eval::evaluateAgents(agents, ep, /*allow_partial=*/true);
+  if (ev) {
+    j["merged_ate_rmse_m"] = ev->merged_ate.trans_m.rmse;
+    j["agents_evaluated"] = ev->agents.size();
+  }
+  return j;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string json_path;
+  std::vector<int> counts = {3, 10};
+  int keypoints = 200;
+  Config config;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--json" && i + 1 < argc) {
+      json_path = argv[++i];
+    } else if (a == "--agents" && i + 1 < argc) {
+      counts.clear();
+      std::stringstream ss(argv[++i]);
+      std::string item;
+      while (std::getline(ss, item, ',')) counts.push_back(std::atoi(item.c_str()));
+    } else if (a == "--set" && i + 1 < argc) {
+      if (Status st = config.applyOverride(argv[++i]); !st) {
+        std::cerr << "hermes_bench_server: " << st.error() << "\n";
+        return 2;
+      }
+    } else if (a == "--source" && i + 1 < argc) {
+      g_source_dir = argv[++i];
+    } else if (a == "--data" && i + 1 < argc) {
+      g_data_dir = argv[++i];
+    } else if (a == "--keypoints" && i + 1 < argc) {
+      keypoints = std::atoi(argv[++i]);
+    } else {
+      std::cerr << "usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints N] [--source REPO] [--data DIR] [--set server.KEY=VALUE]\n";
+      return 2;
+    }
+  }
+  locateDirs(argv[0]);
+  if (Status st = g_params.read(config); !st) {
+    std::cerr << "hermes_bench_server: " << st.error() << "\n";
+    return 2;
+  }
+  if (!config.unusedKeys().empty()) {
+    std::cerr << "hermes_bench_server: unknown key " << config.unusedKeys().front() << "\n";
+    return 2;
+  }
+  nlohmann::json out;
+  out["bench"] = "server";
+  out["runs"] = nlohmann::json::array();
+  for (int n : counts) {
+    if (n < 1) {
+      std::cerr << "hermes_bench_server: agent count must be >= 1\n";
+      return 2;
+    }
+    auto r = run(n, keypoints);
+    if (!r) {
+      std::cerr << "hermes_bench_server: " << r.error() << "\n";
+      return 1;
+    }
+    out["runs"].push_back(*r);
+  }
+  const std::string text = out.dump(2);
+  std::cout << text << std::endl;
+  if (!json_path.empty()) std::ofstream(json_path) << text << "\n";
+  return 0;
+}
