@@ -22,6 +22,10 @@ function(hermes_module)
     get_filename_component(stem ${tool} NAME_WE)
     add_executable(hermes_${stem} ${tool})
     target_link_libraries(hermes_${stem} PRIVATE ${M_NAME})
+    # Benchmarks find shipped files and the shared data beside the checkout.
+    target_compile_definitions(hermes_${stem} PRIVATE
+      HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
+      HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data")
     set_target_properties(hermes_${stem} PROPERTIES
       RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/bin)
   endforeach()
