@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <functional>
 
 #include "hermes/core/wire_format.h"
 
@@ -28,7 +29,7 @@ Expected<std::unique_ptr<AgentPipeline>> AgentPipeline::create(const AgentPipeli
   if (!camera.T_B_C.translation().allFinite() || !camera.T_B_C.quat().coeffs().allFinite())
     return Error{"agent " + name + ": non-finite body<-camera extrinsic"};
   // The distiller is created now so that distill.* is validated (strategy
-  // names etc.) even while the window hook is still a no-op.
+  // names etc.) even while the tracker hands out no windows.
   auto distiller = distill::Distiller::create(
       params.distill, [](const Submap& s) { return encodedSizeUncompressed(s); });
   if (!distiller.ok()) return Error{"agent " + name + ": " + distiller.error()};
@@ -44,7 +45,11 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
       camera_(camera),
       T_C_B_(camera.T_B_C.inverse()),
       tracker_(params.tracker, camera.K, camera.baseline),
-      distiller_(std::move(distiller)) {}
+      distiller_(std::move(distiller)),
+      monitor_(params.uplink.monitor) {
+  // Agent identity in the window headers: a stable id from the agent's name.
+  setWindowIdentity(tracker_, uuidFromSeed(std::hash<std::string>{}(name)), 1);
+}
 
 Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
   if (!std::isfinite(frame.stamp))
@@ -65,28 +70,10 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
     ++lost_;
   }
   const auto t1 = std::chrono::steady_clock::now();
-  windowStep(frame.stamp);
+  runWindowStep(tracker_, *distiller_, monitor_, frame.stamp, &windows_, &timings_);
   timings_.add("window", msSince(t1));
   timings_.add("agent_total", msSince(t0));
   return result;
-}
-
-// HOOK: 5-s window -> distill -> encode -> uplink.
-// TODO(mapping): needs Tracker::takeWindowIfDue(stamp) returning the finished
-// 5-s window as a hermes::Submap (local mapping + window extraction, owned by
-// the `mapping` engineer; not on main yet). When it exists this becomes:
-//   if (auto window = tracker_.takeWindowIfDue(stamp)) {
-//     distill::CoordinatorInput in{monitor.budgetRate(stamp), backlog, loops, probe};
-//     auto r = distiller_->distill(*window, hint, in);            // timings "distill"
-//     if (r.report.ok && !r.report.deferred) {
-//       auto bytes = encodeSubmap(r.submap);                      // timings "encode"
-//       uplink.submit(session, seq++, *bytes, stamp); ++submaps_sent_; bytes_sent_ += size;
-//     }
-//   }
-// Until then no window is produced here (no fake windows): submaps/bytes stay 0.
-void AgentPipeline::windowStep(double stamp) {
-  (void)stamp;
-  (void)distiller_;
 }
 
 AgentMetrics AgentPipeline::metrics() const {
@@ -95,8 +82,9 @@ AgentMetrics AgentPipeline::metrics() const {
   m.lost_rate = lostRate();
   m.keyframes = static_cast<std::int64_t>(tracker_.keyframes().size());
   m.landmarks = static_cast<std::int64_t>(tracker_.landmarks().size());
-  m.bytes = bytes_sent_;
-  m.submaps_sent = submaps_sent_;
+  m.bytes = windows_.bytes;
+  m.submaps_sent = windows_.sent;
+  m.submaps_deferred = windows_.deferred;
   return m;
 }
 

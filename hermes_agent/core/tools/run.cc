@@ -241,7 +241,6 @@ int main(int argc, char** argv) {
   RunMetrics metrics;
   metrics.per_agent.push_back(agent.metrics());
   metrics.per_agent.back().submaps_applied = 0;
-  metrics.per_agent.back().submaps_deferred = 0;
   metrics.bytes_total = agent.bytesSent();
   TimingStats timings = agent.timings();
   timings.merge(io_timings);

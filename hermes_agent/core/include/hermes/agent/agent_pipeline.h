@@ -2,16 +2,19 @@
 // (Tracker), keeps the body trajectory in the dataset's ground-truth frame
 // convention (T_W_B = T_W_C * T_B_C^-1; W is the odometry frame = first camera
 // pose), counts lost frames and times each stage. The 5-s window -> distill ->
-// encode -> uplink step has a marked hook (windowStep) that stays a no-op
-// until the tracker hands out windows (see agent_pipeline.cc).
+// encode step (window_step.h) runs as soon as the tracker hands out windows
+// (Tracker::takeWindowIfDue); until then it is a no-op. Handing the encoded
+// submaps to an UplinkSender is the server run's part (not here yet).
 #pragma once
 
 #include <cstdint>
 #include <memory>
 #include <string>
 
+#include "hermes/agent/bandwidth_monitor.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/agent/window_step.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/trajectory.h"
 #include "hermes/distill/distiller.h"
@@ -45,9 +48,10 @@ class AgentPipeline {
   double lostRate() const { return frames_ > 0 ? double(lost_) / double(frames_) : 0.0; }
   const TimingStats& timings() const { return timings_; }
   const Tracker& tracker() const { return tracker_; }
-  /// Submaps produced by the window step so far (0 until windows exist).
-  std::int64_t submapsSent() const { return submaps_sent_; }
-  std::int64_t bytesSent() const { return bytes_sent_; }
+  /// Windows distilled and encoded so far (all zero until windows exist).
+  const WindowCounters& windows() const { return windows_; }
+  std::int64_t submapsSent() const { return windows_.sent; }
+  std::int64_t bytesSent() const { return windows_.bytes; }
 
   /// This agent's share of the metrics JSON (no accuracy fields: see fillAccuracy).
   AgentMetrics metrics() const;
@@ -55,8 +59,6 @@ class AgentPipeline {
  private:
   AgentPipeline(const AgentPipelineParams& params, const std::string& name,
                 const AgentCamera& camera, std::unique_ptr<distill::Distiller> distiller);
-  /// HOOK: 5-s window -> distill -> encode -> uplink (see agent_pipeline.cc).
-  void windowStep(double stamp);
 
   AgentPipelineParams params_;
   std::string name_;
@@ -66,7 +68,8 @@ class AgentPipeline {
   std::unique_ptr<distill::Distiller> distiller_;
   Trajectory trajectory_;
   std::int64_t frames_ = 0, lost_ = 0;
-  std::int64_t submaps_sent_ = 0, bytes_sent_ = 0;
+  BandwidthMonitor monitor_;
+  WindowCounters windows_;
   double last_stamp_ = 0;
   TimingStats timings_;
 };
