@@ -1,0 +1,55 @@
+// Configuration of one offline run (hermes_run): every module's Params read
+// from one Config (YAML file + `--set key=value` overrides), the check that no
+// key was left unread (typos are errors), and the config_used.yaml text.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "hermes/agent/tracker.h"
+#include "hermes/agent/uplink_sender.h"
+#include "hermes/core/config.h"
+#include "hermes/core/dataset.h"
+#include "hermes/core/evaluation.h"
+#include "hermes/distill/params.h"
+
+namespace hermes::agent {
+
+/// Parameters of the agent pipeline proper (front end, distillation, uplink).
+struct AgentPipelineParams {
+  /// Default spool folder "spool" (uplink.buffer.dir); hermes_run resolves a
+  /// relative folder under its --out folder.
+  AgentPipelineParams() { uplink.buffer.dir = "spool"; }
+
+  TrackerParams tracker;             ///< sections orb, stereo, rgbd, matching, pose, keyframe, tracker
+  distill::DistillParams distill;    ///< section distill
+  UplinkParams uplink;               ///< section uplink (buffer, monitor)
+
+  Status read(const Config& config);
+  Status validate() const;
+  void write(ConfigWriter* out) const;
+};
+
+/// Everything a run reads: the pipeline plus dataset reading and evaluation.
+struct RunParams {
+  AgentPipelineParams agent;
+  DatasetParams dataset;   ///< section dataset
+  eval::EvalParams eval;   ///< section eval
+
+  Status read(const Config& config);
+  Status validate() const;
+  void write(ConfigWriter* out) const;
+};
+
+/// Builds the run's Config: `file` (empty: no file, all defaults) plus the
+/// overrides in order. Errors name the file or the bad assignment.
+Expected<Config> loadRunConfig(const std::string& file, const std::vector<std::string>& sets);
+
+/// Reads RunParams from `config` and fails when a key was not read by any
+/// module (the message lists the unknown keys and the config origin).
+Expected<RunParams> readRunParams(const Config& config);
+
+/// The YAML written as OUT/config_used.yaml.
+std::string configUsedYaml(const RunParams& params);
+
+}  // namespace hermes::agent

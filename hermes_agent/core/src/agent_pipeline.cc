@@ -1,0 +1,91 @@
+#include "hermes/agent/agent_pipeline.h"
+
+#include <chrono>
+#include <cmath>
+#include <functional>
+
+#include "hermes/core/wire_format.h"
+
+namespace hermes::agent {
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+      .count();
+}
+
+}  // namespace
+
+Expected<std::unique_ptr<AgentPipeline>> AgentPipeline::create(const AgentPipelineParams& params,
+                                                               const std::string& name,
+                                                               const AgentCamera& camera) {
+  if (Status s = params.validate(); !s) return Error{s.error()};
+  const PinholeIntrinsics& K = camera.K;
+  if (!(K.fx > 0 && K.fy > 0 && std::isfinite(K.cx) && std::isfinite(K.cy) && K.width > 0 &&
+        K.height > 0))
+    return Error{"agent " + name + ": invalid camera intrinsics"};
+  if (!(camera.baseline >= 0) || !std::isfinite(camera.baseline))
+    return Error{"agent " + name + ": invalid stereo baseline"};
+  if (!camera.T_B_C.translation().allFinite() || !camera.T_B_C.quat().coeffs().allFinite())
+    return Error{"agent " + name + ": non-finite body<-camera extrinsic"};
+  // The distiller is created now so that distill.* is validated (strategy
+  // names etc.) even while the tracker hands out no windows.
+  auto distiller = distill::Distiller::create(
+      params.distill, [](const Submap& s) { return encodedSizeUncompressed(s); });
+  if (!distiller.ok()) return Error{"agent " + name + ": " + distiller.error()};
+  return std::unique_ptr<AgentPipeline>(
+      new AgentPipeline(params, name, camera, std::move(*distiller)));
+}
+
+AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::string& name,
+                             const AgentCamera& camera,
+                             std::unique_ptr<distill::Distiller> distiller)
+    : params_(params),
+      name_(name),
+      camera_(camera),
+      T_C_B_(camera.T_B_C.inverse()),
+      tracker_(params.tracker, camera.K, camera.baseline),
+      distiller_(std::move(distiller)),
+      monitor_(params.uplink.monitor) {
+  // Agent identity in the window headers: a stable id from the agent's name.
+  setWindowIdentity(tracker_, uuidFromSeed(std::hash<std::string>{}(name)), 1);
+}
+
+Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
+  if (!std::isfinite(frame.stamp))
+    return Error{"agent " + name_ + ": non-finite frame stamp"};
+  if (frames_ > 0 && !(frame.stamp > last_stamp_))
+    return Error{"agent " + name_ + ": frame stamp " + std::to_string(frame.stamp) +
+                 " s is not after the previous one (" + std::to_string(last_stamp_) + " s)"};
+  const auto t0 = std::chrono::steady_clock::now();
+  auto result = tracker_.feed(frame);
+  timings_.add("track", msSince(t0));
+  if (!result.ok()) return Error{"agent " + name_ + ": " + result.error()};
+  last_stamp_ = frame.stamp;
+  ++frames_;
+  if (result->status == TrackingStatus::kOk) {
+    // Body pose in the odometry world: T_W_B = T_W_C * T_C_B.
+    trajectory_.push_back(StampedPose{frame.stamp, result->T_W_C * T_C_B_});
+  } else {
+    ++lost_;
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  runWindowStep(tracker_, *distiller_, monitor_, frame.stamp, &windows_, &timings_);
+  timings_.add("window", msSince(t1));
+  timings_.add("agent_total", msSince(t0));
+  return result;
+}
+
+AgentMetrics AgentPipeline::metrics() const {
+  AgentMetrics m;
+  m.agent = name_;
+  m.lost_rate = lostRate();
+  m.keyframes = static_cast<std::int64_t>(tracker_.keyframes().size());
+  m.landmarks = static_cast<std::int64_t>(tracker_.landmarks().size());
+  m.bytes = windows_.bytes;
+  m.submaps_sent = windows_.sent;
+  m.submaps_deferred = windows_.deferred;
+  return m;
+}
+
+}  // namespace hermes::agent

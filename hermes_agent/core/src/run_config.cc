@@ -1,0 +1,80 @@
+#include "hermes/agent/run_config.h"
+
+namespace hermes::agent {
+
+Status AgentPipelineParams::read(const Config& config) {
+  if (Status s = tracker.read(config); !s) return s;
+  if (Status s = distill.read(config); !s) return s;
+  if (Status s = uplink.read(config); !s) return s;
+  return validate();
+}
+
+Status AgentPipelineParams::validate() const {
+  if (Status s = tracker.validate(); !s) return s;
+  if (Status s = distill.validate(); !s) return s;
+  return uplink.validate();
+}
+
+void AgentPipelineParams::write(ConfigWriter* out) const {
+  tracker.write(out);
+  distill.write(out);
+  uplink.write(*out);
+}
+
+Status RunParams::read(const Config& config) {
+  if (Status s = agent.read(config); !s) return s;
+  if (Status s = dataset.read(config); !s) return s;
+  if (Status s = eval.read(config, "eval"); !s) return s;
+  return validate();
+}
+
+Status RunParams::validate() const {
+  if (Status s = agent.validate(); !s) return s;
+  if (Status s = dataset.validate(); !s) return s;
+  return eval.validate();
+}
+
+void RunParams::write(ConfigWriter* out) const {
+  agent.write(out);
+  dataset.write(*out);
+  out->set("eval.align", std::string(toString(eval.align)));
+  out->set("eval.max_dt", eval.max_dt);
+  out->set("eval.rpe_delta_s", eval.rpe_delta_s);
+  out->set("eval.rpe_delta_frames", eval.rpe_delta_frames);
+  out->set("eval.rpe_tolerance", eval.rpe_tolerance);
+}
+
+Expected<Config> loadRunConfig(const std::string& file, const std::vector<std::string>& sets) {
+  Config config;
+  if (!file.empty()) {
+    auto loaded = Config::fromFile(file);
+    if (!loaded.ok()) return Error{loaded.error()};
+    config = std::move(*loaded);
+  }
+  for (const std::string& assignment : sets) {
+    if (Status s = config.applyOverride(assignment); !s)
+      return Error{"--set " + assignment + ": " + s.error()};
+  }
+  return config;
+}
+
+Expected<RunParams> readRunParams(const Config& config) {
+  RunParams params;
+  if (Status s = params.read(config); !s) return Error{s.error()};
+  const std::vector<std::string> unused = config.unusedKeys();
+  if (!unused.empty()) {
+    std::string list;
+    for (const std::string& k : unused) list += (list.empty() ? "" : ", ") + k;
+    return Error{"unknown configuration key" + std::string(unused.size() > 1 ? "s" : "") + " " +
+                 list + " (in " + config.origin() + ")"};
+  }
+  return params;
+}
+
+std::string configUsedYaml(const RunParams& params) {
+  ConfigWriter writer;
+  params.write(&writer);
+  return writer.yaml();
+}
+
+}  // namespace hermes::agent
