@@ -12,10 +12,10 @@ TEST(LocalMapper, BundleAdjustmentKeepsOrImprovesTrackingAccuracy) {
   TrackerParams with, without;
   without.mapping.enable_ba = false;
   Tracker a(with, test::roomK(), 0.11), b(without, test::roomK(), 0.11);
-  auto sa = test::runRoomSequence(&a, true, 40);
+  auto sa = test::runRoomSequence(&a, true, 30);
   ASSERT_GT(sa.frames, 0) << "opencv-doc photos missing";
-  auto sb = test::runRoomSequence(&b, true, 40);
-  std::printf("stereo room 40 frames: ATE RMSE with BA %.4f m (%d kf, BA mean %.1f ms max %.1f ms), "
+  auto sb = test::runRoomSequence(&b, true, 30);
+  std::printf("stereo room 30 frames: ATE RMSE with BA %.4f m (%d kf, BA mean %.1f ms max %.1f ms), "
               "without %.4f m\n",
               sa.rmse, sa.keyframes, sa.mean_ba_ms, sa.max_ba_ms, sb.rmse);
   EXPECT_EQ(sa.lost, 0);
@@ -56,5 +56,115 @@ TEST(LocalMapper, MapStaysConsistentAfterCullingAndOutlierRemoval) {
     bool prev = false;
     for (const auto& [id, n] : cov) prev = prev || (id == k - 1 && n == sharedLandmarks(kfs, lms, k, k - 1));
     EXPECT_TRUE(prev) << "keyframe " << k;
+  }
+}
+
+// ---- Accuracy on a short rendered EuRoC MH_01 stereo clip -----------------
+
+#include <chrono>
+
+#include <opencv2/core.hpp>
+
+#include "hermes/core/evaluation.h"
+#include "hermes/core/render/raycaster.h"
+#include "hermes/core/render/rig.h"
+#include "hermes/core/render/scene.h"
+#include "hermes/core/render/sensor.h"
+#include "hermes/core/stereo_rig.h"
+#include "hermes/core/trajectory.h"
+
+namespace {
+
+struct ClipResult {
+  double ate_m = -1;
+  int frames = 0, lost = 0, keyframes = 0;
+  double mean_ba_ms = 0, track_s = 0;
+  double path_m = 0;  ///< ground-truth path length of the clip
+};
+
+/// Renders `seconds` of MH_01 (from `offset_s` after the start) at `hz`, raw
+/// distorted EuRoC cam0/cam1 images with sensor noise, rectifies and tracks them;
+/// ATE (SE(3) alignment) of the body trajectory against ground truth.
+ClipResult trackRenderedClip(bool ba, double offset_s, double seconds, double hz) {
+  ClipResult out;
+  auto gt = readTumTrajectory(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_01_easy.txt");
+  if (!gt.ok()) return out;
+  std::vector<Vec3> pos;
+  for (const auto& p : *gt) pos.push_back(p.T_W_B.translation());
+  static auto scene = render::buildScene(pos, render::SceneParams{});
+  if (!scene.ok()) return out;
+  StereoRig rig{render::eurocCam0(), render::eurocCam1()};
+  auto rect = rectify(rig);
+  if (!rect.ok()) return out;
+  render::Raycaster rc0(*scene, render::RayGrid::fromRadtan(rig.left));
+  render::Raycaster rc1(*scene, render::RayGrid::fromRadtan(rig.right));
+  render::Sensor sensor(render::SensorParams{}, 11, 752, 480);
+  TrackerParams p;
+  p.mapping.enable_ba = ba;
+  Tracker tracker(p, rect->K, rect->baseline);
+  Trajectory est;
+  render::RenderOutput ro;
+  double ba_sum = 0;
+  int ba_n = 0;
+  const int n = int(seconds * hz);
+  for (int k = 0; k < n; ++k) {
+    const double t = gt->front().t + offset_s + k / hz;
+    SE3 T_W_B;
+    if (!interpolatePose(*gt, t, &T_W_B)) break;
+    rc0.render(T_W_B * rig.left.T_B_C, &ro);
+    cv::Mat l = sensor.expose(ro.radiance, t, 0);
+    rc1.render(T_W_B * rig.right.T_B_C, &ro);
+    cv::Mat r = sensor.expose(ro.radiance, t, 1);
+    CameraFrame f;
+    f.stamp = t;
+    rect->rectifyImages(l, r, &f.left, &f.right);
+    const auto c0 = std::chrono::steady_clock::now();
+    auto res = tracker.feed(f);
+    out.track_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - c0).count();
+    if (!res.ok()) return out;
+    ++out.frames;
+    if (res->mapping.ba_ms > 0) {
+      ba_sum += res->mapping.ba_ms;
+      ++ba_n;
+    }
+    if (res->status != TrackingStatus::kOk) {
+      ++out.lost;
+      continue;
+    }
+    if (!est.empty()) {
+      SE3 prev;
+      interpolatePose(*gt, est.back().t, &prev);
+      out.path_m += (T_W_B.translation() - prev.translation()).norm();
+    }
+    est.push_back({t, res->T_W_C * rect->T_B_Crect.inverse()});  // odometry <- body
+  }
+  out.keyframes = int(tracker.keyframes().size());
+  out.mean_ba_ms = ba_n ? ba_sum / ba_n : 0;
+  auto assoc = eval::associate(*gt, est, 0.01);
+  if (!assoc.ok() || assoc->matched() < 10) return out;
+  auto ate = eval::computeAte(*assoc, eval::AlignMode::kSE3);
+  if (ate.ok()) out.ate_m = ate->trans_m.rmse;
+  return out;
+}
+
+}  // namespace
+
+TEST(LocalMapper, RenderedEurocClipAccuracy) {
+  // Measured (60-65 s of MH_01, 2.3 m path): ATE 4.6 mm with and without local
+  // BA (BA off: set ba to false);
+  // only the BA run is kept here to stay within the unit-test time budget.
+  for (bool ba : {true}) {
+    const auto c0 = std::chrono::steady_clock::now();
+    ClipResult r = trackRenderedClip(ba, 60.0, 5.0, 10.0);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - c0).count();
+    std::printf("MH_01 rendered 5 s @10 Hz, BA %s: ATE %.4f m, %d frames, %d lost, %d kf, "
+                "BA mean %.1f ms, tracking %.2f s, total %.1f s, path %.2f m\n",
+                ba ? "on" : "off", r.ate_m, r.frames, r.lost, r.keyframes, r.mean_ba_ms,
+                r.track_s, wall, r.path_m);
+    ASSERT_GT(r.frames, 0) << "ground truth or render failed";
+    EXPECT_EQ(r.lost, 0);
+    EXPECT_GE(r.ate_m, 0);
+    EXPECT_GT(r.path_m, 0.5);   // the clip really moves
+    EXPECT_LT(r.ate_m, 0.015);  // measured 0.0046 m
   }
 }
