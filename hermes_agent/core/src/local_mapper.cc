@@ -1,6 +1,7 @@
 #include "hermes/agent/local_mapper.h"
 
 #include <algorithm>
+#include <cmath>
 #include <unordered_map>
 
 #include "hermes/agent/covisibility.h"
@@ -14,12 +15,15 @@ Status LocalMapperParams::read(const Config& c) {
                           {"max_fixed", &max_fixed},
                           {"min_shared", &min_shared},
                           {"cull_after_keyframes", &cull_after_keyframes},
-                          {"min_observations", &min_observations}}) {
+                          {"min_observations", &min_observations},
+                          {"triangulation_keyframes", &triangulation_keyframes},
+                          {"max_hamming", &max_hamming}}) {
     s = c.get(std::string("mapping.") + key, ptr);
     if (!s) return s;
   }
   for (auto [key, ptr] : {std::pair<const char*, double*>{"min_found_ratio", &min_found_ratio},
-                          {"virtual_baseline", &virtual_baseline}}) {
+                          {"virtual_baseline", &virtual_baseline},
+                          {"min_parallax_deg", &min_parallax_deg}}) {
     s = c.get(std::string("mapping.") + key, ptr);
     if (!s) return s;
   }
@@ -37,6 +41,9 @@ void LocalMapperParams::write(ConfigWriter* w) const {
   w->set("mapping.min_observations", min_observations);
   w->set("mapping.min_found_ratio", min_found_ratio);
   w->set("mapping.virtual_baseline", virtual_baseline);
+  w->set("mapping.triangulation_keyframes", triangulation_keyframes);
+  w->set("mapping.max_hamming", max_hamming);
+  w->set("mapping.min_parallax_deg", min_parallax_deg);
   ba.write(w, "mapping.ba");
 }
 
@@ -49,6 +56,10 @@ Status LocalMapperParams::validate() const {
   if (!(min_found_ratio >= 0 && min_found_ratio <= 1))
     return Error{"mapping.min_found_ratio must be in [0, 1]"};
   if (!(virtual_baseline > 0)) return Error{"mapping.virtual_baseline must be > 0"};
+  if (triangulation_keyframes < 0) return Error{"mapping.triangulation_keyframes must be >= 0"};
+  if (max_hamming < 0 || max_hamming > 256) return Error{"mapping.max_hamming must be in [0, 256]"};
+  if (!(min_parallax_deg > 0 && min_parallax_deg < 90))
+    return Error{"mapping.min_parallax_deg must be in (0, 90)"};
   return ba.validate();
 }
 
@@ -103,6 +114,7 @@ LocalMappingStats LocalMapper::process(std::vector<Keyframe>* kfs, std::vector<L
       ++st.culled;
     }
   }
+  triangulate(kfs, lms, scales, &st);
   if (!params_.enable_ba || kfs->size() < 2) return st;
 
   // 2. Window: newest ba_window keyframes free, covisible older ones fixed.
@@ -179,6 +191,76 @@ LocalMappingStats LocalMapper::process(std::vector<Keyframe>* kfs, std::vector<L
     if (l.observations.empty() && l.id < bad_.size()) bad_[l.id] = true;
   }
   return st;
+}
+
+void LocalMapper::triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
+                              const std::vector<float>& scales, LocalMappingStats* st) {
+  Keyframe& kn = kfs->back();
+  auto sigma = [&](const Keypoint& k) { return k.octave < scales.size() ? scales[k.octave] : 1.f; };
+  const double cos_min = std::cos(params_.min_parallax_deg * M_PI / 180);
+  const auto cov = covisibleKeyframes(*kfs, *lms, kn.id, params_.min_shared);
+  const SE3 T_W_N = kn.T_A_C, T_N_W = T_W_N.inverse();
+  for (int c = 0; c < int(cov.size()) && c < params_.triangulation_keyframes; ++c) {
+    Keyframe& kk = (*kfs)[cov[c].first];
+    const SE3 T_W_K = kk.T_A_C, T_K_W = T_W_K.inverse();
+    const SE3 T_K_N = T_K_W * T_W_N;
+    if (T_K_N.translation().norm() < 1e-3) continue;
+    const Mat3 E = hat(T_K_N.translation()) * T_K_N.rotation();  // x_K^T E x_N = 0
+    std::vector<std::uint32_t> free_k;
+    for (std::uint32_t j = 0; j < kk.keypoints.size(); ++j)
+      if (kk.keypoint_landmark[j] == kInvalidId) free_k.push_back(j);
+    for (std::uint32_t i = 0; i < kn.keypoints.size(); ++i) {
+      if (kn.keypoint_landmark[i] != kInvalidId) continue;
+      const Keypoint& a = kn.keypoints[i];
+      const Vec3 xn((a.u - K_.cx) / K_.fx, (a.v - K_.cy) / K_.fy, 1);
+      const Vec3 line = E * xn;
+      const double line_norm = line.head<2>().norm();
+      int best = 257, second = 257;
+      std::uint32_t best_j = 0;
+      for (std::uint32_t j : free_k) {
+        if (kk.keypoint_landmark[j] != kInvalidId) continue;
+        const Keypoint& b = kk.keypoints[j];
+        const Vec3 xk((b.u - K_.cx) / K_.fx, (b.v - K_.cy) / K_.fy, 1);
+        // Epipolar distance in pixels (normalised distance · fx).
+        if (std::abs(xk.dot(line)) / line_norm * K_.fx > 2.0 * 1.96 * sigma(b)) continue;
+        const int d = hammingDistance(kn.descriptors[i], kk.descriptors[j]);
+        if (d < best) {
+          second = best;
+          best = d;
+          best_j = j;
+        } else if (d < second) {
+          second = d;
+        }
+      }
+      if (best > params_.max_hamming || best > 0.7 * second) continue;
+      const Keypoint& b = kk.keypoints[best_j];
+      // Midpoint triangulation of the two world rays.
+      const Vec3 fn = T_W_N.rotation() * K_.bearing(Vec2(a.u, a.v));
+      const Vec3 fk = T_W_K.rotation() * K_.bearing(Vec2(b.u, b.v));
+      if (fn.dot(fk) > cos_min) continue;  // too little parallax
+      const Vec3 on = T_W_N.translation(), ok = T_W_K.translation();
+      Eigen::Matrix<double, 3, 2> A;
+      A << fn, -fk;
+      const Vec2 s = A.colPivHouseholderQr().solve(ok - on);
+      if (!(s[0] > 0 && s[1] > 0)) continue;
+      const Vec3 p = 0.5 * (on + s[0] * fn + ok + s[1] * fk);
+      const Vec3 pn = T_N_W * p, pk = T_K_W * p;
+      if (pn.z() <= 0 || pk.z() <= 0) continue;
+      const double en = (K_.project(pn) - Vec2(a.u, a.v)).norm() / sigma(a);
+      const double ek = (K_.project(pk) - Vec2(b.u, b.v)).norm() / sigma(b);
+      if (en > 2.45 || ek > 2.45) continue;
+      Landmark l;
+      l.id = lms->size();
+      l.p_A = p;
+      l.descriptor = kn.descriptors[i];
+      l.observations = {{kk.id, best_j}, {kn.id, i}};
+      kn.keypoint_landmark[i] = l.id;
+      kk.keypoint_landmark[best_j] = l.id;
+      noteCreated(l.id, kn.id);
+      st->triangulated.emplace_back(l.id, i);
+      lms->push_back(std::move(l));
+    }
+  }
 }
 
 }  // namespace hermes

@@ -253,6 +253,11 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
     insertKeyframe(frame.stamp, r.T_W_C, fs, keypoint_landmark);
     r.new_keyframe = true;
     runLocalMapping(&r, fs.scales);
+    for (const auto& [id, kp] : r.mapping.triangulated) {  // new points from local mapping
+      landmark_angle_.resize(landmarks_.size(), 0.f);
+      landmark_origin_.resize(landmarks_.size(), keyframes_.back().id);
+      landmark_angle_[id] = fs.angles[kp];
+    }
   }
   return r;
 }

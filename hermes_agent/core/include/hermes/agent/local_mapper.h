@@ -1,4 +1,7 @@
-// Local mapping on keyframe insertion (DESIGN.md §3): windowed bundle
+// Local mapping on keyframe insertion (DESIGN.md §3): triangulation of the
+// newest keyframe's unlinked keypoints against its covisible keyframes
+// (epipolar distance, descriptor ratio test, parallax, positive depth and
+// reprojection checks; midpoint of the two rays), windowed bundle
 // adjustment over the newest keyframes (free) and their covisible older
 // keyframes (fixed), removal of outlier observations, and culling of landmarks
 // that are rarely found where they should be visible or that gathered too few
@@ -7,6 +10,8 @@
 // ids remain indices; they never enter the local map again.
 #pragma once
 
+#include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "hermes/agent/bundle_adjustment.h"
@@ -24,6 +29,9 @@ struct LocalMapperParams {
   int min_observations = 2;     ///< ... it must then have at least this many keyframe views
   double min_found_ratio = 0.25;///< found / predicted-visible below this = culled
   double virtual_baseline = 0.08;  ///< [m] turns RGB-D depth into a right-u residual
+  int triangulation_keyframes = 4; ///< covisible keyframes searched for new points
+  int max_hamming = 40;            ///< descriptor distance for a triangulation match
+  double min_parallax_deg = 2.0;   ///< bearing angle needed to triangulate
   BundleAdjustmentParams ba;
 
   /// Keys under "mapping" (and "mapping.ba").
@@ -36,6 +44,8 @@ struct LocalMappingStats {
   double ba_ms = 0;
   int free_keyframes = 0, fixed_keyframes = 0, points = 0;
   int outliers_removed = 0, culled = 0;
+  /// Landmarks triangulated across keyframes: (id, keypoint index in the newest keyframe).
+  std::vector<std::pair<LandmarkId, std::uint32_t>> triangulated;
 };
 
 class LocalMapper {
@@ -58,6 +68,8 @@ class LocalMapper {
  private:
   void removeObservation(std::vector<Keyframe>* kfs, Landmark* l, std::size_t index);
   void cull(std::vector<Keyframe>* kfs, Landmark* l);
+  void triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
+                   const std::vector<float>& scales, LocalMappingStats* st);
 
   LocalMapperParams params_;
   PinholeIntrinsics K_;

@@ -4,11 +4,10 @@
 // local map, robust motion-only pose optimisation (PnP RANSAC when the
 // prediction fails or after a loss: relocalisation against the local map), and
 // the keyframe policy decides when a new keyframe adds fresh depth landmarks.
-// Each new keyframe runs local mapping (local_mapper.h: landmark culling and a
-// windowed bundle adjustment). Every window period the map since the previous
+// Each new keyframe runs local mapping (local_mapper.h: landmark culling,
+// two-view triangulation against covisible keyframes, windowed bundle adjustment). Every window period the map since the previous
 // window can be taken as a Submap for distillation (takeWindowIfDue).
-// Not yet here: multi-view triangulation of keypoints without depth and
-// duplicate landmark fusion.
+// Not yet here: duplicate landmark fusion.
 #pragma once
 
 #include <cstdint>
