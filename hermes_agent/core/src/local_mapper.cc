@@ -115,6 +115,7 @@ LocalMappingStats LocalMapper::process(std::vector<Keyframe>* kfs, std::vector<L
     }
   }
   triangulate(kfs, lms, scales, &st);
+  fuse(kfs, lms, scales, &st);
   if (!params_.enable_ba || kfs->size() < 2) return st;
 
   // 2. Window: newest ba_window keyframes free, covisible older ones fixed.
@@ -191,6 +192,73 @@ LocalMappingStats LocalMapper::process(std::vector<Keyframe>* kfs, std::vector<L
     if (l.observations.empty() && l.id < bad_.size()) bad_[l.id] = true;
   }
   return st;
+}
+
+void LocalMapper::fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
+                       const std::vector<float>& scales, LocalMappingStats* st) {
+  Keyframe& kn = kfs->back();
+  const SE3 T_N_W = kn.T_A_C.inverse();
+  std::vector<LandmarkId> candidates;
+  for (const auto& [k, n] : covisibleKeyframes(*kfs, *lms, kn.id, params_.min_shared))
+    for (LandmarkId id : (*kfs)[k].keypoint_landmark)
+      if (id != kInvalidId && !isBad(id)) candidates.push_back(id);
+  std::sort(candidates.begin(), candidates.end());
+  candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  for (LandmarkId id : candidates) {
+    Landmark& l = (*lms)[id];
+    if (isBad(id) || l.observations.empty()) continue;
+    bool seen = false;
+    for (const Observation& o : l.observations) seen = seen || o.keyframe == kn.id;
+    if (seen) continue;
+    const Vec3 pc = T_N_W * l.p_A;
+    if (pc.z() <= 0.05) continue;
+    const Vec2 uv = K_.project(pc);
+    if (!K_.inImage(uv)) continue;
+    int best = params_.max_hamming + 1;
+    std::uint32_t best_i = 0;
+    for (std::uint32_t i = 0; i < kn.keypoints.size(); ++i) {
+      const Keypoint& k = kn.keypoints[i];
+      const float sg = k.octave < scales.size() ? scales[k.octave] : 1.f;
+      if ((Vec2(k.u, k.v) - uv).squaredNorm() > 5.991 * sg * sg) continue;
+      const int d = hammingDistance(l.descriptor, kn.descriptors[i]);
+      if (d < best) {
+        best = d;
+        best_i = i;
+      }
+    }
+    if (best > params_.max_hamming) continue;
+    const LandmarkId other = kn.keypoint_landmark[best_i];
+    if (other == kInvalidId) {
+      l.observations.push_back({kn.id, best_i});
+      kn.keypoint_landmark[best_i] = id;
+      ++st->fused;
+      continue;
+    }
+    if (other == id) continue;
+    // Merge the landmark with fewer observations into the other one.
+    Landmark& a = (*lms)[id];
+    Landmark& b = (*lms)[other];
+    Landmark& keep = a.observations.size() >= b.observations.size() ? a : b;
+    Landmark& drop = &keep == &a ? b : a;
+    for (const Observation& o : drop.observations) {
+      Keyframe& kf = (*kfs)[o.keyframe];
+      bool has = false;
+      for (const Observation& q : keep.observations) has = has || q.keyframe == o.keyframe;
+      if (has) {
+        kf.keypoint_landmark[o.keypoint] = kInvalidId;
+      } else {
+        kf.keypoint_landmark[o.keypoint] = keep.id;
+        keep.observations.push_back(o);
+      }
+    }
+    drop.observations.clear();
+    if (drop.id < bad_.size()) bad_[drop.id] = true;
+    if (keep.id < visible_.size() && drop.id < visible_.size()) {
+      visible_[keep.id] += visible_[drop.id];
+      found_[keep.id] += found_[drop.id];
+    }
+    ++st->fused;
+  }
 }
 
 void LocalMapper::triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,

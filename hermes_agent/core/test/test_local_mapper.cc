@@ -150,8 +150,8 @@ ClipResult trackRenderedClip(bool ba, double offset_s, double seconds, double hz
 }  // namespace
 
 TEST(LocalMapper, RenderedEurocClipAccuracy) {
-  // Measured (60-65 s of MH_01, 2.3 m path): ATE 4.6 mm with and without local
-  // BA (BA off: set ba to false);
+  // Measured (60-65 s of MH_01, 2.3 m path): ATE 3.9 mm with local mapping,
+  // 4.6 mm before triangulation/fusion (BA off: set ba to false);
   // only the BA run is kept here to stay within the unit-test time budget.
   for (bool ba : {true}) {
     const auto c0 = std::chrono::steady_clock::now();
@@ -165,6 +165,6 @@ TEST(LocalMapper, RenderedEurocClipAccuracy) {
     EXPECT_EQ(r.lost, 0);
     EXPECT_GE(r.ate_m, 0);
     EXPECT_GT(r.path_m, 0.5);   // the clip really moves
-    EXPECT_LT(r.ate_m, 0.015);  // measured 0.0046 m
+    EXPECT_LT(r.ate_m, 0.015);  // measured 0.0039 m
   }
 }

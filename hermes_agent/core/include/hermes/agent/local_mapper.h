@@ -1,7 +1,10 @@
 // Local mapping on keyframe insertion (DESIGN.md §3): triangulation of the
 // newest keyframe's unlinked keypoints against its covisible keyframes
 // (epipolar distance, descriptor ratio test, parallax, positive depth and
-// reprojection checks; midpoint of the two rays), windowed bundle
+// reprojection checks; midpoint of the two rays), fusion of duplicates (local
+// landmarks projected into the newest keyframe: a close keypoint with a
+// similar descriptor gains the observation, or, if it already has another
+// landmark, the two merge into the one with more observations), windowed bundle
 // adjustment over the newest keyframes (free) and their covisible older
 // keyframes (fixed), removal of outlier observations, and culling of landmarks
 // that are rarely found where they should be visible or that gathered too few
@@ -44,6 +47,7 @@ struct LocalMappingStats {
   double ba_ms = 0;
   int free_keyframes = 0, fixed_keyframes = 0, points = 0;
   int outliers_removed = 0, culled = 0;
+  int fused = 0;  ///< duplicate landmarks merged + observations added by projection
   /// Landmarks triangulated across keyframes: (id, keypoint index in the newest keyframe).
   std::vector<std::pair<LandmarkId, std::uint32_t>> triangulated;
 };
@@ -68,6 +72,8 @@ class LocalMapper {
  private:
   void removeObservation(std::vector<Keyframe>* kfs, Landmark* l, std::size_t index);
   void cull(std::vector<Keyframe>* kfs, Landmark* l);
+  void fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
+            const std::vector<float>& scales, LocalMappingStats* st);
   void triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
                    const std::vector<float>& scales, LocalMappingStats* st);
 

@@ -7,7 +7,7 @@
 // Each new keyframe runs local mapping (local_mapper.h: landmark culling,
 // two-view triangulation against covisible keyframes, windowed bundle adjustment). Every window period the map since the previous
 // window can be taken as a Submap for distillation (takeWindowIfDue).
-// Not yet here: duplicate landmark fusion.
+// Landmark fusion merges duplicates seen by the newest keyframe.
 #pragma once
 
 #include <cstdint>
