@@ -4,6 +4,7 @@
 
 #include "hermes/agent/covisibility.h"
 #include "hermes/agent/tracker.h"
+#include "plane_scene.h"
 #include "room_sequence.h"
 
 using namespace hermes;
@@ -12,8 +13,28 @@ TEST(LocalMapper, BundleAdjustmentKeepsOrImprovesTrackingAccuracy) {
   TrackerParams with, without;
   without.mapping.enable_ba = false;
   Tracker a(with, test::roomK(), 0.11), b(without, test::roomK(), 0.11);
-  auto sa = test::runRoomSequence(&a, true, 30);
+  std::vector<LandmarkId> triangulated;
+  auto sa = test::runRoomSequence(&a, true, 30, [&](double, const TrackResult& r) {
+    for (const auto& t : r.mapping.triangulated) triangulated.push_back(t.first);
+  });
   ASSERT_GT(sa.frames, 0) << "opencv-doc photos missing";
+  // Triangulated points lie on the scene's planes (world = first camera's pose · odometry).
+  const auto planes = test::roomCornerScene();
+  const SE3 T_W_O = test::roomGroundTruth(0);
+  int checked = 0, on_plane = 0;
+  for (LandmarkId id : triangulated) {
+    if (a.isLandmarkBad(id)) continue;
+    const Vec3 p = T_W_O * a.landmarks()[id].p_A;
+    double best = 1e9;
+    for (const auto& pl : planes) best = std::min(best, std::abs((p - pl.origin).dot(pl.e1.cross(pl.e2))));
+    ++checked;
+    // Two-view depth error grows with range: allow 5 % of the distance.
+    on_plane += best < 0.05 * a.landmarks()[id].p_A.norm();
+  }
+  std::printf("triangulated %zu points, %d kept, %d within 5 %% of their range of a plane\n", triangulated.size(),
+              checked, on_plane);
+  EXPECT_GT(checked, 0);
+  EXPECT_GE(on_plane, 0.8 * checked);  // measured 77 of 86
   auto sb = test::runRoomSequence(&b, true, 30);
   std::printf("stereo room 30 frames: ATE RMSE with BA %.4f m (%d kf, BA mean %.1f ms max %.1f ms), "
               "without %.4f m\n",
