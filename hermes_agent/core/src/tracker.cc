@@ -19,7 +19,7 @@ const char* toString(TrackingStatus s) {
 Status TrackerParams::read(const Config& c) {
   for (Status s : {orb.read(c, "orb"), stereo.read(c, "stereo"), rgbd.read(c, "rgbd"),
                    matching.read(c, "matching"), pose.read(c, "pose"),
-                   keyframe.read(c, "keyframe")})
+                   keyframe.read(c, "keyframe"), mapping.read(c), window.read(c)})
     if (!s) return s;
   for (auto [key, ptr] : {std::pair<const char*, int*>{"init_min_points", &init_min_points},
                           {"min_tracked", &min_tracked},
@@ -39,6 +39,8 @@ void TrackerParams::write(ConfigWriter* w) const {
   matching.write(w, "matching");
   pose.write(w, "pose");
   keyframe.write(w, "keyframe");
+  mapping.write(w);
+  window.write(w);
   w->set("tracker.init_min_points", init_min_points);
   w->set("tracker.min_tracked", min_tracked);
   w->set("tracker.local_map_keyframes", local_map_keyframes);
@@ -47,7 +49,7 @@ void TrackerParams::write(ConfigWriter* w) const {
 
 Status TrackerParams::validate() const {
   for (Status s : {orb.validate(), stereo.validate(), rgbd.validate(), matching.validate(),
-                   pose.validate(), keyframe.validate()})
+                   pose.validate(), keyframe.validate(), mapping.validate(), window.validate()})
     if (!s) return s;
   if (init_min_points < 4) return Error{"tracker.init_min_points must be >= 4"};
   if (min_tracked < pose.min_inliers)
@@ -59,7 +61,7 @@ Status TrackerParams::validate() const {
 
 Tracker::Tracker(const TrackerParams& params, const PinholeIntrinsics& K, double baseline)
     : params_(params), K_(K), baseline_(baseline), extractor_(params.orb),
-      policy_(params.keyframe) {
+      policy_(params.keyframe), mapper_(params.mapping, K, baseline) {
   Status s = params_.validate();
   HERMES_CHECK(s.ok(), s.error());
   HERMES_CHECK(K.fx > 0 && K.fy > 0 && K.width > 0 && K.height > 0, "tracker: bad intrinsics");
@@ -118,6 +120,7 @@ void Tracker::insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& f
       landmarks_.push_back(l);
       landmark_angle_.push_back(fs.angles[i]);
       landmark_origin_.push_back(kf.id);
+      mapper_.noteCreated(l.id, kf.id);
       id = l.id;
     }
     if (id == kInvalidId) continue;
@@ -138,7 +141,7 @@ std::vector<std::size_t> Tracker::localMap() const {
           : 0;
   for (std::size_t k = first; k < keyframes_.size(); ++k)
     for (LandmarkId id : keyframes_[k].keypoint_landmark)
-      if (id != kInvalidId) ids.insert(id);
+      if (id != kInvalidId && !mapper_.isBad(id)) ids.insert(id);
   return {ids.begin(), ids.end()};
 }
 
@@ -147,6 +150,7 @@ bool Tracker::initialise(const CameraFrame& frame, FeatureSet& fs, TrackResult* 
   for (const auto& k : fs.keypoints) with_depth += k.depth > 0;
   if (with_depth < params_.init_min_points) return false;
   insertKeyframe(frame.stamp, SE3(), fs, std::vector<int>(fs.size(), -1));
+  last_stamp_ = frame.stamp;
   status_ = TrackingStatus::kOk;
   T_C_W_last_ = SE3();
   have_velocity_ = false;
@@ -220,6 +224,8 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   have_velocity_ = was_ok;
   T_C_W_prev_ = T_C_W_last_;
   T_C_W_last_ = est->T_C_W;
+  prev_stamp_ = last_stamp_;
+  last_stamp_ = frame.stamp;
   r.status = status_;
   r.T_W_C = est->T_C_W.inverse();
   r.tracked = est->num_inliers;
@@ -229,6 +235,16 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
     keypoint_landmark[corr_keypoint[i]] = corr_landmark[i];
     landmark_angle_[corr_landmark[i]] = fs.angles[corr_keypoint[i]];
   }
+  // Culling statistics: which local landmarks should have been seen, which were.
+  {
+    std::vector<bool> found(landmarks_.size(), false);
+    for (std::size_t i = 0; i < c.size(); ++i)
+      if (est->inlier[i]) found[corr_landmark[i]] = true;
+    for (std::size_t id : local) {
+      const Vec3 pc = est->T_C_W * landmarks_[id].p_A;
+      if (pc.z() > 0 && K_.inImage(K_.project(pc))) mapper_.noteVisible(id, found[id]);
+    }
+  }
   // The reference count is that of the first frame tracked after the last
   // keyframe (a new keyframe's own landmark count includes points never tracked).
   if (reference_tracked_ == 0) reference_tracked_ = r.tracked;
@@ -236,8 +252,58 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   if (r.keyframe.insert) {
     insertKeyframe(frame.stamp, r.T_W_C, fs, keypoint_landmark);
     r.new_keyframe = true;
+    runLocalMapping(&r, fs.scales);
+    for (const auto& [id, kp] : r.mapping.triangulated) {  // new points from local mapping
+      landmark_angle_.resize(landmarks_.size(), 0.f);
+      landmark_origin_.resize(landmarks_.size(), keyframes_.back().id);
+      landmark_angle_[id] = fs.angles[kp];
+    }
   }
   return r;
+}
+
+void Tracker::runLocalMapping(TrackResult* r, const std::vector<float>& scales) {
+  const SE3 before = keyframes_.back().T_A_C;
+  r->mapping = mapper_.process(&keyframes_, &landmarks_, scales);
+  // The newest keyframe is the current frame: carry its correction into the
+  // motion model (both poses, so the velocity is kept).
+  const SE3 T_W_C = keyframes_.back().T_A_C;
+  const SE3 correction = T_W_C * before.inverse();  // W <- W
+  T_C_W_last_ = T_W_C.inverse();
+  T_C_W_prev_ = T_C_W_prev_ * correction.inverse();
+  r->T_W_C = T_W_C;
+}
+
+void Tracker::setAgent(const Uuid& agent, std::uint32_t session) {
+  window_header_.agent = agent;
+  window_header_.session = session;
+}
+
+std::optional<Submap> Tracker::takeWindowIfDue(double t) {
+  if (keyframes_.empty()) return std::nullopt;
+  if (!window_started_) {
+    window_started_ = true;
+    window_last_t_ = keyframes_.front().stamp;
+  }
+  if (t - window_last_t_ < params_.window.period_s || window_next_kf_ >= keyframes_.size())
+    return std::nullopt;
+  Submap s = buildWindow(keyframes_, landmarks_, window_next_kf_, keyframes_.size(), K_,
+                         window_header_, params_.window);
+  ++window_header_.seq;
+  window_next_kf_ = keyframes_.size();
+  window_last_t_ = t;
+  return s;
+}
+
+distill::MotionHint Tracker::motionHint() const {
+  distill::MotionHint h;
+  if (status_ != TrackingStatus::kOk || !have_velocity_) return h;
+  h.valid = true;
+  h.T_A_C = T_C_W_last_.inverse();
+  h.T_Cprev_Ccurr = T_C_W_prev_ * T_C_W_last_.inverse();
+  h.dt_s = last_stamp_ > prev_stamp_ ? last_stamp_ - prev_stamp_ : 0.05;
+  h.camera_id = 0;
+  return h;
 }
 
 }  // namespace hermes

@@ -4,11 +4,15 @@
 // local map, robust motion-only pose optimisation (PnP RANSAC when the
 // prediction fails or after a loss: relocalisation against the local map), and
 // the keyframe policy decides when a new keyframe adds fresh depth landmarks.
-// Local mapping (triangulation across keyframes, fusion, local BA) is not here.
+// Each new keyframe runs local mapping (local_mapper.h: landmark culling,
+// two-view triangulation against covisible keyframes, windowed bundle adjustment). Every window period the map since the previous
+// window can be taken as a Submap for distillation (takeWindowIfDue).
+// Landmark fusion merges duplicates seen by the newest keyframe.
 #pragma once
 
 #include <cstdint>
 #include <deque>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,12 +20,15 @@
 
 #include "hermes/agent/feature_matching.h"
 #include "hermes/agent/keyframe_policy.h"
+#include "hermes/agent/local_mapper.h"
 #include "hermes/agent/orb_extractor.h"
 #include "hermes/agent/pose_estimation.h"
 #include "hermes/agent/rgbd_depth.h"
 #include "hermes/agent/stereo_matcher.h"
+#include "hermes/agent/submap_window.h"
 #include "hermes/core/config.h"
 #include "hermes/core/map_types.h"
+#include "hermes/distill/scores.h"
 
 namespace hermes {
 
@@ -41,12 +48,14 @@ struct TrackerParams {
   ProjectionMatchParams matching;
   PoseEstimationParams pose;
   KeyframePolicyParams keyframe;
+  LocalMapperParams mapping;
+  SubmapWindowParams window;
   int init_min_points = 60;       ///< depth keypoints needed to initialise
   int min_tracked = 25;           ///< inliers for tracking to count as OK
   int local_map_keyframes = 6;    ///< landmarks of the last N keyframes form the local map
   double relocalise_radius_px = 40;  ///< search radius when lost
 
-  /// Reads sections orb, stereo, rgbd, matching, pose, keyframe and tracker.
+  /// Reads sections orb, stereo, rgbd, matching, pose, keyframe, mapping, window and tracker.
   Status read(const Config& config);
   void write(ConfigWriter* writer) const;
   Status validate() const;
@@ -62,6 +71,7 @@ struct TrackResult {
   int tracked = 0;           ///< inliers after optimisation
   bool new_keyframe = false;
   KeyframeDecision keyframe;
+  LocalMappingStats mapping;  ///< filled when new_keyframe (T_W_C is then the optimised pose)
 };
 
 class Tracker {
@@ -74,6 +84,18 @@ class Tracker {
   const std::vector<Keyframe>& keyframes() const { return keyframes_; }
   const std::vector<Landmark>& landmarks() const { return landmarks_; }
   TrackingStatus status() const { return status_; }
+  bool isLandmarkBad(LandmarkId id) const { return mapper_.isBad(id); }
+
+  /// Identity written into the headers of the windows.
+  void setAgent(const Uuid& agent, std::uint32_t session);
+  /// The keyframes inserted since the previous window once `t` is at least
+  /// window.period_s after the previous window's hand-over (the first window
+  /// is due period_s after the first keyframe); nullopt otherwise or if no new
+  /// keyframe exists. Windows are consecutive: each starts with the keyframe
+  /// after the previous window's last one.
+  std::optional<Submap> takeWindowIfDue(double t);
+  /// Latest VO motion for the distiller (valid after two consecutive tracked frames).
+  distill::MotionHint motionHint() const;
 
  private:
   Status computeFeatures(const CameraFrame& frame, FeatureSet* features) const;
@@ -81,6 +103,7 @@ class Tracker {
   void insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& features,
                       const std::vector<int>& keypoint_landmark);
   std::vector<std::size_t> localMap() const;
+  void runLocalMapping(TrackResult* r, const std::vector<float>& scales);
 
   TrackerParams params_;
   PinholeIntrinsics K_;
@@ -95,6 +118,13 @@ class Tracker {
   SE3 T_C_W_last_, T_C_W_prev_;             ///< last two tracked poses
   bool have_velocity_ = false;
   int reference_tracked_ = 0;
+  LocalMapper mapper_;
+  double last_stamp_ = 0, prev_stamp_ = 0;
+  // Window hand-over state.
+  SubmapHeader window_header_;
+  std::size_t window_next_kf_ = 0;
+  double window_last_t_ = 0;
+  bool window_started_ = false;
 };
 
 }  // namespace hermes

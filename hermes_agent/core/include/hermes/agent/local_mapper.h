@@ -1,0 +1,88 @@
+// Local mapping on keyframe insertion (DESIGN.md §3): triangulation of the
+// newest keyframe's unlinked keypoints against its covisible keyframes
+// (epipolar distance, descriptor ratio test, parallax, positive depth and
+// reprojection checks; midpoint of the two rays), fusion of duplicates (local
+// landmarks projected into the newest keyframe: a close keypoint with a
+// similar descriptor gains the observation, or, if it already has another
+// landmark, the two merge into the one with more observations), windowed bundle
+// adjustment over the newest keyframes (free) and their covisible older
+// keyframes (fixed), removal of outlier observations, and culling of landmarks
+// that are rarely found where they should be visible or that gathered too few
+// observations a few keyframes after their creation. Culled landmarks stay in
+// the tracker's vector as tombstones (no observations, no keypoint links) so
+// ids remain indices; they never enter the local map again.
+#pragma once
+
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+#include "hermes/agent/bundle_adjustment.h"
+#include "hermes/core/config.h"
+#include "hermes/core/map_types.h"
+
+namespace hermes {
+
+struct LocalMapperParams {
+  bool enable_ba = true;
+  int ba_window = 5;            ///< newest keyframes optimised
+  int max_fixed = 8;            ///< covisible older keyframes held fixed
+  int min_shared = 15;          ///< shared landmarks for covisibility
+  int cull_after_keyframes = 3; ///< check a landmark this many keyframes after creation
+  int min_observations = 2;     ///< ... it must then have at least this many keyframe views
+  double min_found_ratio = 0.25;///< found / predicted-visible below this = culled
+  double virtual_baseline = 0.08;  ///< [m] turns RGB-D depth into a right-u residual
+  int triangulation_keyframes = 4; ///< covisible keyframes searched for new points
+  int max_hamming = 40;            ///< descriptor distance for a triangulation match
+  double min_parallax_deg = 2.0;   ///< bearing angle needed to triangulate
+  BundleAdjustmentParams ba;
+
+  /// Keys under "mapping" (and "mapping.ba").
+  Status read(const Config& config);
+  void write(ConfigWriter* writer) const;
+  Status validate() const;
+};
+
+struct LocalMappingStats {
+  double ba_ms = 0;
+  int free_keyframes = 0, fixed_keyframes = 0, points = 0;
+  int outliers_removed = 0, culled = 0;
+  int fused = 0;  ///< duplicate landmarks merged + observations added by projection
+  /// Landmarks triangulated across keyframes: (id, keypoint index in the newest keyframe).
+  std::vector<std::pair<LandmarkId, std::uint32_t>> triangulated;
+};
+
+class LocalMapper {
+ public:
+  LocalMapper(const LocalMapperParams& params, const PinholeIntrinsics& K, double baseline);
+
+  /// Book-keeping the tracker reports: creation, and per tracked frame whether a
+  /// local landmark projected into the image (visible) and was an inlier (found).
+  void noteCreated(LandmarkId id, KeyframeId keyframe);
+  void noteVisible(LandmarkId id, bool found);
+  bool isBad(LandmarkId id) const { return id < bad_.size() && bad_[id]; }
+
+  /// Runs after the newest keyframe (keyframes->back()) has been inserted.
+  /// `scales` are the pyramid level scales (pixel sigma per octave).
+  LocalMappingStats process(std::vector<Keyframe>* keyframes, std::vector<Landmark>* landmarks,
+                            const std::vector<float>& scales);
+
+  const LocalMapperParams& params() const { return params_; }
+
+ private:
+  void removeObservation(std::vector<Keyframe>* kfs, Landmark* l, std::size_t index);
+  void cull(std::vector<Keyframe>* kfs, Landmark* l);
+  void fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
+            const std::vector<float>& scales, LocalMappingStats* st);
+  void triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
+                   const std::vector<float>& scales, LocalMappingStats* st);
+
+  LocalMapperParams params_;
+  PinholeIntrinsics K_;
+  double baseline_;
+  std::vector<KeyframeId> origin_;
+  std::vector<int> visible_, found_;
+  std::vector<bool> bad_;
+};
+
+}  // namespace hermes

@@ -1,0 +1,43 @@
+// Window extraction for distillation (DESIGN.md §3/§4): every period the agent
+// hands over the keyframes inserted since the previous window as a Submap.
+//
+// Odometry edge information: the relative pose between consecutive keyframes
+// is trusted in proportion to the landmarks they share. With n shared
+// landmarks, information = (n / reference_shared) · diag(1/σt², 1/σt², 1/σt²,
+// 1/σr², 1/σr², 1/σr²) ([rho; phi] order), n clamped to >= 1, i.e. σt, σr are
+// the standard deviations at `reference_shared` shared landmarks.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "hermes/core/config.h"
+#include "hermes/core/map_types.h"
+
+namespace hermes {
+
+struct SubmapWindowParams {
+  double period_s = 5.0;         ///< Δt between windows [s]
+  double sigma_t_m = 0.02;       ///< odometry translation sigma at reference_shared [m]
+  double sigma_r_rad = 0.005;    ///< odometry rotation sigma at reference_shared [rad]
+  int reference_shared = 100;
+
+  /// Keys under "window".
+  Status read(const Config& config);
+  void write(ConfigWriter* writer) const;
+  Status validate() const;
+};
+
+/// Builds the submap of keyframes [first, last) of `keyframes` (ids = indices):
+/// keyframes copied with their current poses, landmark links outside the
+/// window's landmark set cleared, landmarks observed by them with observations
+/// restricted to the window, odometry edges between consecutive keyframes,
+/// cameras = {K}. header.t_start / t_end are set from the keyframe stamps.
+Submap buildWindow(const std::vector<Keyframe>& keyframes, const std::vector<Landmark>& landmarks,
+                   std::size_t first, std::size_t last, const PinholeIntrinsics& K,
+                   SubmapHeader header, const SubmapWindowParams& params);
+
+/// The information matrix documented above.
+Mat6 odometryInformation(int shared_landmarks, const SubmapWindowParams& params);
+
+}  // namespace hermes

@@ -1,0 +1,91 @@
+#include "hermes/agent/submap_window.h"
+
+#include <algorithm>
+#include <unordered_map>
+
+#include "hermes/agent/covisibility.h"
+
+namespace hermes {
+
+Status SubmapWindowParams::read(const Config& c) {
+  for (auto [key, ptr] : {std::pair<const char*, double*>{"period_s", &period_s},
+                          {"sigma_t_m", &sigma_t_m},
+                          {"sigma_r_rad", &sigma_r_rad}}) {
+    Status s = c.get(std::string("window.") + key, ptr);
+    if (!s) return s;
+  }
+  Status s = c.get("window.reference_shared", &reference_shared);
+  if (!s) return s;
+  return validate();
+}
+
+void SubmapWindowParams::write(ConfigWriter* w) const {
+  w->set("window.period_s", period_s);
+  w->set("window.sigma_t_m", sigma_t_m);
+  w->set("window.sigma_r_rad", sigma_r_rad);
+  w->set("window.reference_shared", reference_shared);
+}
+
+Status SubmapWindowParams::validate() const {
+  if (!(period_s > 0)) return Error{"window.period_s must be > 0"};
+  if (!(sigma_t_m > 0)) return Error{"window.sigma_t_m must be > 0"};
+  if (!(sigma_r_rad > 0)) return Error{"window.sigma_r_rad must be > 0"};
+  if (reference_shared < 1) return Error{"window.reference_shared must be >= 1"};
+  return Status::Ok();
+}
+
+Mat6 odometryInformation(int shared, const SubmapWindowParams& p) {
+  const double w = double(std::max(shared, 1)) / p.reference_shared;
+  Vec6 d;
+  d << Vec3::Constant(1 / (p.sigma_t_m * p.sigma_t_m)),
+      Vec3::Constant(1 / (p.sigma_r_rad * p.sigma_r_rad));
+  return Mat6(w * d.asDiagonal());
+}
+
+Submap buildWindow(const std::vector<Keyframe>& kfs, const std::vector<Landmark>& lms,
+                   std::size_t first, std::size_t last, const PinholeIntrinsics& K,
+                   SubmapHeader header, const SubmapWindowParams& params) {
+  Submap s;
+  last = std::min(last, kfs.size());
+  s.cameras = {K};
+  if (first >= last) {
+    s.header = header;
+    return s;
+  }
+  header.t_start = kfs[first].stamp;
+  header.t_end = kfs[last - 1].stamp;
+  s.header = header;
+  std::unordered_map<LandmarkId, std::size_t> lm_index;
+  for (std::size_t k = first; k < last; ++k) {
+    Keyframe kf = kfs[k];
+    kf.camera_id = 0;
+    for (std::size_t i = 0; i < kf.keypoint_landmark.size(); ++i) {
+      const LandmarkId id = kf.keypoint_landmark[i];
+      if (id == kInvalidId || id >= lms.size() || lms[id].observations.empty()) {
+        kf.keypoint_landmark[i] = kInvalidId;
+        continue;
+      }
+      if (lm_index.emplace(id, s.landmarks.size()).second) {
+        Landmark l;
+        l.id = id;
+        l.p_A = lms[id].p_A;
+        l.descriptor = lms[id].descriptor;
+        for (const Observation& o : lms[id].observations)
+          if (o.keyframe >= first && o.keyframe < last) l.observations.push_back(o);
+        s.landmarks.push_back(std::move(l));
+      }
+    }
+    s.keyframes.push_back(std::move(kf));
+  }
+  for (std::size_t k = first + 1; k < last; ++k) {
+    OdometryEdge e;
+    e.from = kfs[k - 1].id;
+    e.to = kfs[k].id;
+    e.T_from_to = kfs[k - 1].T_A_C.inverse() * kfs[k].T_A_C;
+    e.information = odometryInformation(sharedLandmarks(kfs, lms, k - 1, k), params);
+    s.odometry.push_back(e);
+  }
+  return s;
+}
+
+}  // namespace hermes

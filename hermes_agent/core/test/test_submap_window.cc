@@ -1,0 +1,86 @@
+#include <gtest/gtest.h>
+
+#include "hermes/agent/submap_window.h"
+#include "hermes/agent/tracker.h"
+#include "room_sequence.h"
+
+using namespace hermes;
+
+TEST(SubmapWindow, ConsecutiveWindowsAreValidAndChain) {
+  TrackerParams p;
+  p.window.period_s = 0.5;
+  Tracker tracker(p, test::roomK(), 0.11);
+  tracker.setAgent(uuidFromSeed(4), 2);
+  std::vector<Submap> windows;
+  std::vector<distill::MotionHint> hints;
+  auto st = test::runRoomSequence(&tracker, true, 40, [&](double t, const TrackResult&) {
+    if (auto w = tracker.takeWindowIfDue(t)) {
+      windows.push_back(std::move(*w));
+      hints.push_back(tracker.motionHint());
+    }
+  });
+  ASSERT_GT(st.frames, 0) << "opencv-doc photos missing";
+  ASSERT_GE(windows.size(), 2u);
+  KeyframeId next = 0;
+  for (std::size_t w = 0; w < windows.size(); ++w) {
+    const Submap& s = windows[w];
+    EXPECT_EQ(s.validate(), "") << "window " << w;
+    EXPECT_EQ(s.header.seq, w);
+    EXPECT_EQ(s.header.session, 2u);
+    EXPECT_EQ(s.header.agent, uuidFromSeed(4));
+    ASSERT_EQ(s.cameras.size(), 1u);
+    EXPECT_EQ(s.cameras[0].fx, test::roomK().fx);
+    ASSERT_FALSE(s.keyframes.empty());
+    EXPECT_EQ(s.keyframes.front().id, next) << "window " << w << " does not continue the last";
+    next = s.keyframes.back().id + 1;
+    EXPECT_DOUBLE_EQ(s.header.t_start, s.keyframes.front().stamp);
+    EXPECT_DOUBLE_EQ(s.header.t_end, s.keyframes.back().stamp);
+    EXPECT_FALSE(s.landmarks.empty());
+    // Odometry edges: one per consecutive pair, composing to the window's poses.
+    ASSERT_EQ(s.odometry.size(), s.keyframes.size() - 1);
+    SE3 T = s.keyframes.front().T_A_C;
+    for (std::size_t i = 0; i < s.odometry.size(); ++i) {
+      EXPECT_EQ(s.odometry[i].from, s.keyframes[i].id);
+      EXPECT_EQ(s.odometry[i].to, s.keyframes[i + 1].id);
+      EXPECT_GT(s.odometry[i].information.diagonal().minCoeff(), 0);
+      T = T * s.odometry[i].T_from_to;
+    }
+    EXPECT_LT(translationalDistance(T, s.keyframes.back().T_A_C), 1e-9);
+    // Every keypoint link has a landmark in the window observing it back.
+    std::map<LandmarkId, const Landmark*> lm;
+    for (const auto& l : s.landmarks) lm[l.id] = &l;
+    for (const auto& kf : s.keyframes)
+      for (std::size_t i = 0; i < kf.keypoint_landmark.size(); ++i) {
+        if (kf.keypoint_landmark[i] == kInvalidId) continue;
+        ASSERT_TRUE(lm.count(kf.keypoint_landmark[i]));
+        bool back = false;
+        for (const auto& o : lm[kf.keypoint_landmark[i]]->observations)
+          back = back || (o.keyframe == kf.id && o.keypoint == i);
+        EXPECT_TRUE(back);
+      }
+    EXPECT_TRUE(hints[w].valid);
+    EXPECT_GT(hints[w].dt_s, 0);
+  }
+  // Odometry continuity across windows: the step from the last keyframe of
+  // window k to the first of k+1 is as small as steps inside windows.
+  for (std::size_t w = 0; w + 1 < windows.size(); ++w) {
+    const double gap = translationalDistance(windows[w].keyframes.back().T_A_C,
+                                             windows[w + 1].keyframes.front().T_A_C);
+    EXPECT_LT(gap, 0.25) << "between windows " << w << " and " << w + 1;
+    EXPECT_GT(windows[w + 1].header.t_start, windows[w].header.t_end);
+  }
+  // Whatever is left, then nothing new: no window.
+  tracker.takeWindowIfDue(100.0);
+  EXPECT_FALSE(tracker.takeWindowIfDue(200.0).has_value());
+}
+
+TEST(SubmapWindow, OdometryInformationGrowsWithSharedLandmarks) {
+  SubmapWindowParams p;
+  const Mat6 a = odometryInformation(50, p), b = odometryInformation(200, p);
+  EXPECT_NEAR(b(0, 0) / a(0, 0), 4.0, 1e-12);
+  EXPECT_NEAR(odometryInformation(p.reference_shared, p)(0, 0), 1 / (p.sigma_t_m * p.sigma_t_m), 1e-9);
+  EXPECT_NEAR(odometryInformation(p.reference_shared, p)(5, 5), 1 / (p.sigma_r_rad * p.sigma_r_rad), 1e-6);
+  EXPECT_GT(odometryInformation(0, p)(0, 0), 0);  // clamped, never singular
+  p.period_s = 0;
+  EXPECT_FALSE(p.validate().ok());
+}
