@@ -67,8 +67,11 @@ TEST(LocalMapper, MapStaysConsistentAfterCullingAndOutlierRemoval) {
     }
   }
   for (const auto& kf : kfs)
-    for (LandmarkId id : kf.keypoint_landmark)
-      if (id != kInvalidId) EXPECT_FALSE(t.isLandmarkBad(id));
+    for (LandmarkId id : kf.keypoint_landmark) {
+      if (id != kInvalidId) {
+        EXPECT_FALSE(t.isLandmarkBad(id));
+      }
+    }
   EXPECT_GE(bad, culled);
   std::printf("RGB-D room: %zu landmarks, %d culled, %d bad\n", lms.size(), culled, bad);
   // Consecutive keyframes are covisible.
