@@ -1,5 +1,7 @@
 #include "hermes/core/eval_io.h"
 
+#include "hermes/core/euroc_dataset.h"
+
 #include <sys/stat.h>
 
 #include <Eigen/SVD>
@@ -29,32 +31,7 @@ bool isFile(const std::string& p) {
 }  // namespace
 
 Expected<Trajectory> readEurocGroundTruthCsv(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return Error{"ground-truth file '" + path + "' cannot be opened"};
-  Trajectory traj;
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
-    std::replace(line.begin(), line.end(), ',', ' ');
-    std::istringstream ss(line);
-    long long ns = 0;
-    double x, y, z, qw, qx, qy, qz;
-    if (!(ss >> ns >> x >> y >> z >> qw >> qx >> qy >> qz))
-      return Error{path + ":" + std::to_string(lineno) +
-                   ": expected EuRoC columns 'ns, px, py, pz, qw, qx, qy, qz, ...'"};
-    const Quat q(qw, qx, qy, qz);
-    if (!Vec3(x, y, z).allFinite() || !std::isfinite(q.norm()) || q.norm() < 1e-6)
-      return Error{path + ":" + std::to_string(lineno) + ": position or quaternion not valid"};
-    const double t = double(ns / 1000000000LL) + double(ns % 1000000000LL) * 1e-9;
-    if (!traj.empty() && t <= traj.back().t)
-      return Error{path + ":" + std::to_string(lineno) + ": timestamps must increase"};
-    traj.push_back({t, SE3(q, Vec3(x, y, z))});
-  }
-  if (traj.empty()) return Error{"ground-truth file '" + path + "' holds no poses"};
-  return traj;
+  return readEurocGroundTruth(path);  // the dataset reader; one parser for the format
 }
 
 Expected<std::string> resolveTrajectoryPath(const std::string& path) {
