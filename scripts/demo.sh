@@ -34,8 +34,7 @@ done
 GT_DIR="$ROOT/config/trajectories"   # shipped EuRoC ground truth (see its README)
 [[ -f "$GT_DIR/MH_01_easy.txt" ]] || { echo "hermes demo: no EuRoC ground-truth trajectories in $GT_DIR" >&2; exit 2; }
 
-"$HERMES" setup
-"$HERMES" build >/dev/null
+"$HERMES" build >/dev/null   # installs what is missing first
 BIN="$ROOT/build/bin"
 mkdir -p "$OUT" "$CACHE"
 

@@ -1,10 +1,11 @@
 #include "hermes/agent/map_buffer.h"
 
+#include "hermes/core/crc32.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <array>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -17,21 +18,6 @@ constexpr std::uint32_t kMagic = 0x31505348;  // "HSP1"
 constexpr std::uint8_t kData = 1, kAck = 2;
 constexpr std::size_t kHeader = 4 + 4 + 4 + 8 + 4 + 4;
 constexpr std::size_t kMaxRecord = std::size_t{1} << 30;
-
-std::uint32_t crc32Update(std::uint32_t crc, const std::uint8_t* p, std::size_t n) {
-  static const auto table = [] {
-    std::array<std::uint32_t, 256> t{};
-    for (std::uint32_t i = 0; i < 256; ++i) {
-      std::uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      t[i] = c;
-    }
-    return t;
-  }();
-  crc = ~crc;
-  for (std::size_t i = 0; i < n; ++i) crc = table[(crc ^ p[i]) & 0xff] ^ (crc >> 8);
-  return ~crc;
-}
 
 template <class T>
 void put(std::vector<std::uint8_t>& b, T v) {
@@ -56,8 +42,8 @@ std::vector<std::uint8_t> makeRecord(std::uint8_t type, std::uint32_t session, s
   put(r, session);
   put(r, seq);
   put(r, static_cast<std::uint32_t>(payload.size()));
-  std::uint32_t crc = crc32Update(0, r.data(), r.size());
-  crc = crc32Update(crc, payload.data(), payload.size());
+  std::uint32_t crc = crc32(r.data(), r.size());
+  crc = crc32(payload.data(), payload.size(), crc);
   put(r, crc);
   r.insert(r.end(), payload.begin(), payload.end());
   return r;
@@ -156,8 +142,8 @@ Status MapBuffer::replay() {
     const std::uint32_t len = get<std::uint32_t>(h + 20);
     if (get<std::uint32_t>(h) != kMagic || len > kMaxRecord || off + kHeader + len > data.size())
       break;
-    std::uint32_t crc = crc32Update(0, h, 24);
-    crc = crc32Update(crc, h + kHeader, len);
+    std::uint32_t crc = crc32(h, 24);
+    crc = crc32(h + kHeader, len, crc);
     if (crc != get<std::uint32_t>(h + 24)) break;
     const std::uint8_t type = h[4];
     const auto key = std::make_pair(get<std::uint32_t>(h + 8), get<std::uint64_t>(h + 12));
