@@ -48,7 +48,33 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
       distiller_(std::move(distiller)),
       monitor_(params.uplink.monitor) {
   // Agent identity in the window headers: a stable id from the agent's name.
-  setWindowIdentity(tracker_, uuidFromSeed(std::hash<std::string>{}(name)), 1);
+  agent_id_ = uuidFromSeed(std::hash<std::string>{}(name));
+  setWindowIdentity(tracker_, agent_id_, session_);
+}
+
+Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clock_offset_s) {
+  if (uplink_) return Error{"agent " + name_ + ": uplink already attached"};
+  if (frames_ > 0) return Error{"agent " + name_ + ": attach the uplink before the first frame"};
+  if (!std::isfinite(clock_offset_s)) return Error{"agent " + name_ + ": non-finite clock offset"};
+  auto sender = UplinkSender::create(params_.uplink, std::move(transport));
+  if (!sender.ok()) return Error{"agent " + name_ + ": uplink: " + sender.error()};
+  auto session = sender->buffer().newSession();
+  if (!session.ok()) return Error{"agent " + name_ + ": uplink: " + session.error()};
+  uplink_ = std::make_unique<UplinkSender>(std::move(*sender));
+  session_ = *session;
+  clock_offset_ = clock_offset_s;
+  setWindowIdentity(tracker_, agent_id_, session_);
+  return Status::Ok();
+}
+
+Status AgentPipeline::onAck(std::uint32_t session, std::uint64_t seq, double now) {
+  if (!uplink_) return Error{"agent " + name_ + ": acknowledgement without an uplink"};
+  if (last_window_ && *last_window_ == std::make_pair(session, seq)) last_window_acked_ = true;
+  return uplink_->onAck(session, seq, now);
+}
+
+void AgentPipeline::pollUplink(double now) {
+  if (uplink_) uplink_->poll(now);
 }
 
 Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
@@ -70,7 +96,30 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
     ++lost_;
   }
   const auto t1 = std::chrono::steady_clock::now();
-  runWindowStep(tracker_, *distiller_, monitor_, frame.stamp, &windows_, &timings_);
+  if (uplink_) {
+    const double now = frame.stamp - clock_offset_;
+    WindowSink sink;
+    sink.link_now = now;
+    sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
+    sink.loop_closures = loop_closures_;
+    sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
+      // Whether the previous window arrived before this one was planned decides
+      // the monitor's probing (DESIGN §3).
+      if (last_window_) uplink_->monitor().onWindowDelivered(last_window_acked_);
+      const auto key = std::make_pair(submap.header.session, submap.header.seq);
+      Status s = uplink_->submit(key.first, key.second, std::move(bytes), now);
+      if (s) {
+        last_window_ = key;
+        last_window_acked_ = false;
+      }
+      return s;
+    };
+    runWindowStep(tracker_, *distiller_, uplink_->monitor(), frame.stamp, &windows_, &timings_,
+                  &sink);
+    uplink_->poll(now);
+  } else {
+    runWindowStep(tracker_, *distiller_, monitor_, frame.stamp, &windows_, &timings_);
+  }
   timings_.add("window", msSince(t1));
   timings_.add("agent_total", msSince(t0));
   return result;
@@ -84,7 +133,7 @@ AgentMetrics AgentPipeline::metrics() const {
   m.landmarks = static_cast<std::int64_t>(tracker_.landmarks().size());
   m.bytes = windows_.bytes;
   m.submaps_sent = windows_.sent;
-  m.submaps_deferred = windows_.deferred;
+  m.submaps_deferred = windows_.deferred + windows_.refused;
   return m;
 }
 

@@ -2,18 +2,23 @@
 // (Tracker), keeps the body trajectory in the dataset's ground-truth frame
 // convention (T_W_B = T_W_C * T_B_C^-1; W is the odometry frame = first camera
 // pose), counts lost frames and times each stage. The 5-s window -> distill ->
-// encode step (window_step.h) runs as soon as the tracker hands out windows
-// (Tracker::takeWindowIfDue); until then it is a no-op. Handing the encoded
-// submaps to an UplinkSender is the server run's part (not here yet).
+// encode step (window_step.h) runs whenever the tracker hands out a window
+// (Tracker::takeWindowIfDue). With an uplink attached (attachUplink) the encoded
+// submaps go to an UplinkSender (disk spool, exactly-once delivery through the
+// caller's transport) and the coordinator plans with its measured bandwidth and
+// backlog; without one they are only counted (single-agent runs).
 #pragma once
 
 #include <cstdint>
 #include <memory>
+#include <optional>
+#include <utility>
 #include <string>
 
 #include "hermes/agent/bandwidth_monitor.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/agent/uplink_sender.h"
 #include "hermes/agent/window_step.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/trajectory.h"
@@ -56,6 +61,24 @@ class AgentPipeline {
   /// This agent's share of the metrics JSON (no accuracy fields: see fillAccuracy).
   AgentMetrics metrics() const;
 
+  /// Connects the window step to an uplink: opens the spool (params.uplink.buffer.dir),
+  /// starts a new session, and from then on every encoded window is submitted to an
+  /// UplinkSender that hands frames to `transport`. Uplink time = frame stamp -
+  /// `clock_offset_s` (the offline runner's simulated clock starts at 0 for every
+  /// agent). Call once, before the first frame. Errors: spool cannot be opened.
+  Status attachUplink(UplinkSender::Transport transport, double clock_offset_s = 0);
+  /// Server acknowledgement at uplink time `now` (duplicates are fine).
+  Status onAck(std::uint32_t session, std::uint64_t seq, double now);
+  /// Lets the uplink send what it may at uplink time `now` (feed() also does).
+  void pollUplink(double now);
+  /// Loops the server reports for this agent (the coordinator's alpha rule).
+  void setLoopClosures(int loops) { loop_closures_ = loops; }
+  /// Null until attachUplink().
+  const UplinkSender* uplink() const { return uplink_.get(); }
+  UplinkSender* uplink() { return uplink_.get(); }
+  const Uuid& agentId() const { return agent_id_; }
+  std::uint32_t session() const { return session_; }
+
  private:
   AgentPipeline(const AgentPipelineParams& params, const std::string& name,
                 const AgentCamera& camera, std::unique_ptr<distill::Distiller> distiller);
@@ -67,6 +90,13 @@ class AgentPipeline {
   Tracker tracker_;
   std::unique_ptr<distill::Distiller> distiller_;
   Trajectory trajectory_;
+  Uuid agent_id_{};
+  std::uint32_t session_ = 1;
+  std::unique_ptr<UplinkSender> uplink_;
+  double clock_offset_ = 0;
+  int loop_closures_ = 0;
+  std::optional<std::pair<std::uint32_t, std::uint64_t>> last_window_;  ///< last submitted
+  bool last_window_acked_ = false;
   std::int64_t frames_ = 0, lost_ = 0;
   BandwidthMonitor monitor_;
   WindowCounters windows_;

@@ -6,6 +6,8 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
+#include <vector>
 #include <cstdint>
 #include <optional>
 #include <type_traits>
@@ -20,6 +22,7 @@ namespace hermes::agent {
 
 struct WindowCounters {
   std::int64_t windows = 0, sent = 0, deferred = 0, failed = 0;
+  std::int64_t refused = 0;  ///< encoded but refused by the uplink's buffer (full)
   std::int64_t bytes = 0;  ///< encoded bytes of the sent submaps
 };
 
@@ -49,20 +52,30 @@ void setWindowIdentity(TrackerT& tracker, const Uuid& agent, std::uint32_t sessi
   }
 }
 
-/// One window step at time `stamp` [s]. Without a server the link is unknown:
-/// the budget comes from the monitor's planning rate (its initial guess) and
-/// the backlog is zero. Timings: "distill", "encode".
+/// Where a window step's encoded submap goes. Without a sink (no uplink) the
+/// submap is only counted, the link is unknown: the budget comes from the
+/// monitor's planning rate (its initial guess) and the backlog is zero.
+struct WindowSink {
+  double link_now = 0;        ///< [s] uplink clock for the monitor
+  double backlog_bytes = 0;   ///< unacknowledged bytes in the uplink
+  int loop_closures = 0;      ///< loops the server reported (alpha rule)
+  /// Takes the encoded frame; an error counts the window as refused.
+  std::function<Status(const Submap& submap, std::vector<std::uint8_t>&& frame)> submit;
+};
+
+/// One window step at time `stamp` [s]. Timings: "distill", "encode".
 template <typename TrackerT>
 void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
                    const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
-                   TimingStats* timings) {
+                   TimingStats* timings, const WindowSink* sink = nullptr) {
   if constexpr (TrackerHasWindows<TrackerT>::value) {
     std::optional<Submap> window = tracker.takeWindowIfDue(stamp);
     if (!window) return;
     ++counters->windows;
     distill::CoordinatorInput in;
-    in.bandwidth_Bps = monitor.planningRate(stamp);
-    in.backlog_bytes = 0;
+    in.bandwidth_Bps = monitor.planningRate(sink ? sink->link_now : stamp);
+    in.backlog_bytes = sink ? sink->backlog_bytes : 0;
+    in.loop_closures = sink ? sink->loop_closures : 0;
     const auto t0 = std::chrono::steady_clock::now();
     distill::DistillResult r = distiller.distill(*window, tracker.motionHint(), in);
     const auto t1 = std::chrono::steady_clock::now();
@@ -83,8 +96,15 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
       ++counters->failed;
       return;
     }
+    const auto size = static_cast<std::int64_t>(bytes->size());
+    if (sink && sink->submit) {
+      if (Status s = sink->submit(r.submap, std::move(*bytes)); !s) {
+        ++counters->refused;
+        return;
+      }
+    }
     ++counters->sent;
-    counters->bytes += static_cast<std::int64_t>(bytes->size());
+    counters->bytes += size;
   } else {
     // TODO(mapping): Tracker::takeWindowIfDue(double) -> std::optional<Submap> and
     // Tracker::motionHint() are not on main yet; until they are, no window exists.
@@ -94,6 +114,7 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
     (void)stamp;
     (void)counters;
     (void)timings;
+    (void)sink;
   }
 }
 
