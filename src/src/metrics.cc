@@ -74,6 +74,7 @@ void to_json(json& j, const AgentMetrics& m) {
   j["submaps_deferred"] = orNull(m.submaps_deferred);
   if (m.ate_m) j["ate_m"] = statsJson(*m.ate_m);
   if (m.merged_ate_rmse_m) j["merged_ate_rmse_m"] = *m.merged_ate_rmse_m;
+  if (m.raw_ate_rmse_m) j["raw_ate_rmse_m"] = *m.raw_ate_rmse_m;
   if (m.rpe_trans_rmse_m) j["rpe_trans_rmse_m"] = *m.rpe_trans_rmse_m;
   if (m.rpe_rot_rmse_deg) j["rpe_rot_rmse_deg"] = *m.rpe_rot_rmse_deg;
   if (m.matched_poses) j["matched_poses"] = *m.matched_poses;
@@ -223,6 +224,7 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.submaps_deferred = r.integer("submaps_deferred", true);
   a.ate_m = r.stats("ate_m");
   a.merged_ate_rmse_m = r.number("merged_ate_rmse_m", false);
+  a.raw_ate_rmse_m = r.number("raw_ate_rmse_m", false);
   a.rpe_trans_rmse_m = r.number("rpe_trans_rmse_m", false);
   a.rpe_rot_rmse_deg = r.number("rpe_rot_rmse_deg", false);
   a.matched_poses = r.integer("matched_poses", false);

@@ -96,33 +96,42 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
     ++lost_;
   }
   const auto t1 = std::chrono::steady_clock::now();
-  if (uplink_) {
-    const double now = frame.stamp - clock_offset_;
-    WindowSink sink;
-    sink.link_now = now;
-    sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
-    sink.loop_closures = loop_closures_;
-    sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
-      // Whether the previous window arrived before this one was planned decides
-      // the monitor's probing (DESIGN §3).
-      if (last_window_) uplink_->monitor().onWindowDelivered(last_window_acked_);
-      const auto key = std::make_pair(submap.header.session, submap.header.seq);
-      Status s = uplink_->submit(key.first, key.second, std::move(bytes), now);
-      if (s) {
-        last_window_ = key;
-        last_window_acked_ = false;
-      }
-      return s;
-    };
-    runWindowStep(tracker_, *distiller_, uplink_->monitor(), frame.stamp, &windows_, &timings_,
-                  &sink);
-    uplink_->poll(now);
-  } else {
-    runWindowStep(tracker_, *distiller_, monitor_, frame.stamp, &windows_, &timings_);
-  }
+  windowStep(frame.stamp);
   timings_.add("window", msSince(t1));
   timings_.add("agent_total", msSince(t0));
   return result;
+}
+
+void AgentPipeline::windowStep(double stamp) {
+  if (!uplink_) {
+    runWindowStep(tracker_, *distiller_, monitor_, stamp, &windows_, &timings_);
+    return;
+  }
+  const double now = last_stamp_ - clock_offset_;
+  WindowSink sink;
+  sink.link_now = now;
+  sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
+  sink.loop_closures = loop_closures_;
+  sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
+    // Whether the previous window arrived before this one was planned decides
+    // the monitor's probing (DESIGN §3).
+    if (last_window_) uplink_->monitor().onWindowDelivered(last_window_acked_);
+    const auto key = std::make_pair(submap.header.session, submap.header.seq);
+    Status s = uplink_->submit(key.first, key.second, std::move(bytes), now);
+    if (s) {
+      last_window_ = key;
+      last_window_acked_ = false;
+    }
+    return s;
+  };
+  runWindowStep(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
+  uplink_->poll(now);
+}
+
+void AgentPipeline::flushWindow() {
+  if (frames_ == 0) return;
+  // A stamp one window period after the last frame makes the open window due.
+  windowStep(last_stamp_ + params_.tracker.window.period_s + 1e-6);
 }
 
 AgentMetrics AgentPipeline::metrics() const {

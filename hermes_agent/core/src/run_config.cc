@@ -58,16 +58,19 @@ Expected<Config> loadRunConfig(const std::string& file, const std::vector<std::s
   return config;
 }
 
+Status rejectUnreadKeys(const Config& config) {
+  const std::vector<std::string> unused = config.unusedKeys();
+  if (unused.empty()) return Status::Ok();
+  std::string list;
+  for (const std::string& k : unused) list += (list.empty() ? "" : ", ") + k;
+  return Error{"unknown configuration key" + std::string(unused.size() > 1 ? "s" : "") + " " +
+               list + " (in " + config.origin() + ")"};
+}
+
 Expected<RunParams> readRunParams(const Config& config) {
   RunParams params;
   if (Status s = params.read(config); !s) return Error{s.error()};
-  const std::vector<std::string> unused = config.unusedKeys();
-  if (!unused.empty()) {
-    std::string list;
-    for (const std::string& k : unused) list += (list.empty() ? "" : ", ") + k;
-    return Error{"unknown configuration key" + std::string(unused.size() > 1 ? "s" : "") + " " +
-                 list + " (in " + config.origin() + ")"};
-  }
+  if (Status s = rejectUnreadKeys(config); !s) return Error{s.error()};
   return params;
 }
 

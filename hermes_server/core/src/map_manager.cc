@@ -39,6 +39,20 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
   return Status::Ok();
 }
 
+void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const {
+  place_recognition.write(out, prefix + "place_recognition.");
+  loop_closure.write(&out, prefix + "loop_closure");
+  pcm.write(&out, prefix + "pcm");
+  pose_graph.write(&out, prefix + "pose_graph");
+  const std::string p = prefix + "map.";
+  out.set(p + "rig_neighbours", rig_neighbours);
+  out.set(p + "max_candidates_per_keyframe", max_candidates_per_keyframe);
+  out.set(p + "optimize_every_submaps", optimize_every_submaps);
+  out.set(p + "odometry_sigma_m", odometry_sigma_m);
+  out.set(p + "odometry_sigma_rad", odometry_sigma_rad);
+  out.set(p + "min_world_loops", min_world_loops);
+}
+
 Status MapManagerParams::validate() const {
   if (rig_neighbours < 1) return Error{"rig_neighbours must be >= 1"};
   if (max_candidates_per_keyframe < 0) return Error{"max_candidates_per_keyframe must be >= 0"};

@@ -12,6 +12,12 @@ Status ServerParams::read(const Config& config, const std::string& prefix) {
   return validate();
 }
 
+void ServerParams::write(ConfigWriter& out, const std::string& prefix) const {
+  bookkeeper.write(out, prefix + "bookkeeper.");
+  credibility.write(out, prefix);
+  map.write(out, prefix);
+}
+
 Status ServerParams::validate() const {
   for (Status s : {bookkeeper.validate(), credibility.validate(), map.validate()})
     if (!s) return s;

@@ -141,7 +141,9 @@ TEST(Bookkeeper, UnknownAgentsWhenRegistrationIsRequired) {
 }
 
 TEST(Bookkeeper, WorldFrameAfterThirtyKeyframesEachThenLoopsAnchorOthers) {
-  Bookkeeper bk;  // anchor_min_keyframes = 30
+  BookkeeperParams bp;
+  bp.anchor_min_keyframes = 30;
+  Bookkeeper bk(bp);
   const Uuid a = uuidFromSeed(10), b = uuidFromSeed(11), c = uuidFromSeed(12);
   std::map<RobotId, double> cred = {{0, 0.4}, {1, 0.9}, {2, 0.6}};
   auto credibility = [&](RobotId r) { return cred.at(r); };

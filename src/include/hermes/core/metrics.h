@@ -65,6 +65,7 @@ struct AgentMetrics {
   // Extras.
   std::optional<AccuracyStats> ate_m;           ///< "ate": own alignment
   std::optional<double> merged_ate_rmse_m;      ///< under the run's common alignment
+  std::optional<double> raw_ate_rmse_m;         ///< the agent's own odometry, own alignment
   std::optional<double> rpe_trans_rmse_m, rpe_rot_rmse_deg;
   std::optional<int64_t> matched_poses, unmatched_poses;
   std::optional<double> scale;                  ///< sim3 only

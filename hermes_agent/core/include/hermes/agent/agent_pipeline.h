@@ -71,6 +71,8 @@ class AgentPipeline {
   Status onAck(std::uint32_t session, std::uint64_t seq, double now);
   /// Lets the uplink send what it may at uplink time `now` (feed() also does).
   void pollUplink(double now);
+  /// End of the sequence: distils and submits the open (partial) window now.
+  void flushWindow();
   /// Loops the server reports for this agent (the coordinator's alpha rule).
   void setLoopClosures(int loops) { loop_closures_ = loops; }
   /// Null until attachUplink().
@@ -82,6 +84,8 @@ class AgentPipeline {
  private:
   AgentPipeline(const AgentPipelineParams& params, const std::string& name,
                 const AgentCamera& camera, std::unique_ptr<distill::Distiller> distiller);
+  /// The window step at tracker time `stamp` (uplink time: the last frame's).
+  void windowStep(double stamp);
 
   AgentPipelineParams params_;
   std::string name_;

@@ -45,6 +45,9 @@ struct RunParams {
 /// overrides in order. Errors name the file or the bad assignment.
 Expected<Config> loadRunConfig(const std::string& file, const std::vector<std::string>& sets);
 
+/// Error listing every key of `config` that no module read (typos), with its origin.
+Status rejectUnreadKeys(const Config& config);
+
 /// Reads RunParams from `config` and fails when a key was not read by any
 /// module (the message lists the unknown keys and the config origin).
 Expected<RunParams> readRunParams(const Config& config);

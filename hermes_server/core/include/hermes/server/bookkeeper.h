@@ -48,7 +48,7 @@ using RobotId = std::uint32_t;
 
 struct BookkeeperParams {
   bool require_registration = false;
-  int anchor_min_keyframes = 30;  ///< keyframes every agent must have sent before the world is fixed
+  int anchor_min_keyframes = 10;  ///< keyframes every agent must have sent before the world is fixed
   double stale_after_s = 60.0;    ///< grace for late submaps of a superseded session [s]
   Status read(const Config& config, const std::string& prefix = "server.bookkeeper.");
   void write(ConfigWriter& out, const std::string& prefix = "server.bookkeeper.") const;

@@ -40,6 +40,7 @@ struct MapManagerParams {
   MapManagerParams() { pcm.min_clique_size = 3; }
   Status read(const Config& config, const std::string& prefix = "server.");
   Status validate() const;
+  void write(ConfigWriter& out, const std::string& prefix = "server.") const;
 };
 
 struct MergeStats {

@@ -24,6 +24,7 @@ struct ServerParams {
   MapManagerParams map;           ///< server.place_recognition.*, server.loop_closure.*, ...
   Status read(const Config& config, const std::string& prefix = "server.");
   Status validate() const;
+  void write(ConfigWriter& out, const std::string& prefix = "server.") const;
 };
 
 struct ServerCounters {

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hermes/agent/run_config.h"
+#include "hermes/system/system_params.h"
 #include "hermes/core/evaluation.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/trajectory.h"
@@ -84,7 +85,7 @@ TEST(RunCli, MicroDatasetStaticDroneStaysStill) {
   ASSERT_TRUE(parsed.ok()) << parsed.error();
 
   // The trajectory: every frame, and the drone never moves (< 1 cm, < 0.5 deg).
-  auto traj = readTumTrajectory(out + "/euroc_V1_01_micro_raw.txt");
+  auto traj = readTumTrajectory(out + "/trajectories/euroc_V1_01_micro_raw.tum");
   ASSERT_TRUE(traj.ok()) << traj.error();
   ASSERT_EQ(traj->size(), 95u);
   const SE3& first = traj->front().T_W_B;
@@ -102,7 +103,8 @@ TEST(RunCli, MicroDatasetStaticDroneStaysStill) {
   std::ifstream cf(out + "/config_used.yaml");
   std::stringstream cs;
   cs << cf.rdbuf();
-  for (const char* key : {"distill:", "strategy:", "keyframe:", "uplink:", "dataset:", "eval:"})
+  for (const char* key : {"distill:", "strategy:", "keyframe:", "uplink:", "dataset:", "eval:",
+                          "server:", "link:"})
     EXPECT_NE(cs.str().find(key), std::string::npos) << key;
 }
 
@@ -112,7 +114,7 @@ TEST(RunCli, MaxFramesAndSetOverride) {
                             " --no-server --max-frames 10 --set distill.strategy=greedy_logdet",
                         "short");
   ASSERT_EQ(o.code, 0) << o.err;
-  auto traj = readTumTrajectory(out + "/euroc_V1_01_micro_raw.txt");
+  auto traj = readTumTrajectory(out + "/trajectories/euroc_V1_01_micro_raw.tum");
   ASSERT_TRUE(traj.ok()) << traj.error();
   EXPECT_EQ(traj->size(), 10u);
   std::ifstream cf(out + "/config_used.yaml");
@@ -155,10 +157,16 @@ TEST(RunCli, ErrorsExitTwoNamingTheCulprit) {
   o = run("--dataset " + kMicro + " --dataset " + kMicro + " --out " + out + " --no-server",
           "multi");
   EXPECT_EQ(o.code, 2);
-  EXPECT_NE(o.err.find("not implemented yet"), std::string::npos) << o.err;
-  o = run("--dataset " + kMicro + " --out " + out, "server");
+  EXPECT_NE(o.err.find("one --dataset"), std::string::npos) << o.err;
+  o = run("--dataset " + kMicro + " --out " + out + " --bandwidth 0", "zerobw");
   EXPECT_EQ(o.code, 2);
-  EXPECT_NE(o.err.find("not implemented yet"), std::string::npos) << o.err;
+  EXPECT_NE(o.err.find("--bandwidth"), std::string::npos) << o.err;
+  o = run("--dataset " + kMicro + " --out " + out + " --link-trace /no/such/trace.csv", "notrace");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("/no/such/trace.csv"), std::string::npos) << o.err;
+  o = run("--dataset " + kMicro + " --out " + out + " --set link.loss=1.5", "badloss");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("link.loss"), std::string::npos) << o.err;
 
   o = run("--out " + out, "nodataset");
   EXPECT_EQ(o.code, 2);
@@ -172,20 +180,20 @@ TEST(RunConfig, ShippedConfigsReadCleanly) {
     const std::string path = std::string(HERMES_SOURCE_DIR) + "/config/" + name;
     auto config = agent::loadRunConfig(path, {});
     ASSERT_TRUE(config.ok()) << config.error();
-    auto params = agent::readRunParams(*config);
+    auto params = system::readSystemParams(*config);
     EXPECT_TRUE(params.ok()) << name << ": " << params.error();
   }
   // hermes.yaml holds exactly the defaults: config_used of defaults reads back
   // to the same text.
   auto config = agent::loadRunConfig(std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", {});
   ASSERT_TRUE(config.ok());
-  auto params = agent::readRunParams(*config);
-  ASSERT_TRUE(params.ok());
-  EXPECT_EQ(agent::configUsedYaml(*params), agent::configUsedYaml(agent::RunParams()));
+  auto params = system::readSystemParams(*config);
+  ASSERT_TRUE(params.ok()) << params.error();
+  EXPECT_EQ(params->yaml(), system::SystemParams().yaml());
 
   auto bad = agent::loadRunConfig("", {"tracker.min_trackd=5"});
   ASSERT_TRUE(bad.ok());
-  auto p = agent::readRunParams(*bad);
+  auto p = system::readSystemParams(*bad);
   ASSERT_FALSE(p.ok());
   EXPECT_NE(p.error().find("tracker.min_trackd"), std::string::npos) << p.error();
 }

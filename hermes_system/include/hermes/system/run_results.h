@@ -1,0 +1,53 @@
+// Results of a whole-system run (DESIGN §7): evaluation against each dataset's
+// ground truth and the results folder.
+//   OUT/config_used.yaml                  (written by the caller, before the run)
+//   OUT/metrics.json                      DESIGN §7 contract + extras
+//   OUT/trajectories/<agent>_raw.tum      the agent's own odometry (body, odometry frame)
+//   OUT/trajectories/<agent>_merged.tum   its keyframes in the server's world frame (body)
+//   OUT/bandwidth.csv                     time_s,agent,kBps,link_capacity_kBps
+//   OUT/uplink_estimate.csv               time_s,agent,estimate_kBps (the agents' monitors)
+//   OUT/ate_over_time.csv                 time_s,agent,error_m (merged, common alignment)
+//   OUT/loops.csv                         accepted loops with their error against ground truth
+//   OUT/global_map.ply                    landmarks of the merged map (world frame)
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+
+#include <nlohmann/json_fwd.hpp>
+#include <vector>
+
+#include "hermes/core/metrics.h"
+#include "hermes/system/offline_run.h"
+
+namespace hermes::system {
+
+/// Accuracy of the accepted inter-/intra-agent loops against ground truth.
+struct LoopAccuracy {
+  std::size_t loops = 0;            ///< accepted loops whose keyframes have ground truth
+  std::size_t inter_agent = 0;
+  double median_trans_m = 0, median_rot_deg = 0;
+  double p95_trans_m = 0, max_trans_m = 0;
+};
+
+struct RunResults {
+  RunMetrics metrics;
+  std::optional<LoopAccuracy> loop_accuracy;
+  std::map<std::string, std::size_t> loops_per_pair;  ///< "a-b" -> accepted loops
+  std::vector<std::string> warnings;                  ///< e.g. an agent that could not be evaluated
+};
+
+/// Evaluates the finished run and fills the metrics (no files).
+RunResults evaluateRun(const OfflineRun& run);
+
+/// metrics.json: the DESIGN §7 metrics plus "loop_accuracy", "loops_per_pair", "warnings".
+nlohmann::json resultsJson(const RunResults& results);
+
+/// Writes every file listed above except config_used.yaml. Errors name the file.
+Status writeRunResults(const OfflineRun& run, const RunResults& results, const std::string& out_dir);
+
+/// A short human-readable report (merged agents, ATE, bytes, kB/s, loops).
+std::string formatReport(const OfflineRun& run, const RunResults& results);
+
+}  // namespace hermes::system

@@ -1,0 +1,62 @@
+// Configuration of a whole-system run (hermes_run): the agent pipeline, dataset
+// reading and evaluation (agent::RunParams), the edge server (section server),
+// and the emulated network plus the runner's own clock (section link, system).
+// Read from one Config; a key no module reads is an error.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hermes/agent/run_config.h"
+#include "hermes/core/config.h"
+#include "hermes/core/link_trace.h"
+#include "hermes/server/server.h"
+
+namespace hermes::system {
+
+/// The shared bottleneck all agents' uplinks cross (the server's downlink).
+struct LinkParams {
+  double bandwidth_mbitps = 0;   ///< [Mbit/s] constant shared rate; 0 = unlimited
+  double latency_ms = 20;        ///< [ms] one-way latency (constant links)
+  double loss = 0;               ///< message loss probability in [0, 1) (constant links)
+  std::string trace;             ///< CSV trace file (link_trace.h); overrides the three above
+  int packet_bytes = 1500;       ///< [B] round-robin service unit between agents
+  int seed = 1;                  ///< loss draws
+
+  Status read(const Config& config);
+  Status validate() const;
+  void write(ConfigWriter& out) const;
+  /// The trace in force: the file when `trace` is set, else a constant link.
+  Expected<LinkTrace> makeTrace() const;
+};
+
+/// The runner's simulated clock.
+struct ClockParams {
+  double step_s = 0.01;          ///< [s] network/ack event resolution
+  double server_period_s = 0.5;  ///< [s] the server merges its queue this often
+  double sample_period_s = 1.0;  ///< [s] bandwidth CSV interval
+  double drain_s = 60;           ///< [s] after the last frame, time allowed to deliver the rest
+
+  Status read(const Config& config);
+  Status validate() const;
+  void write(ConfigWriter& out) const;
+};
+
+struct SystemParams {
+  agent::RunParams run;           ///< agent pipeline, dataset, eval
+  server::ServerParams server;    ///< section server
+  LinkParams link;                ///< section link
+  ClockParams clock;              ///< section system
+
+  Status read(const Config& config);
+  Status validate() const;
+  /// The YAML written as OUT/config_used.yaml (reads back to the same params).
+  std::string yaml() const;
+};
+
+/// Reads SystemParams and fails when a key was read by no module (the message
+/// lists the unknown keys and the config origin).
+Expected<SystemParams> readSystemParams(const Config& config);
+
+}  // namespace hermes::system

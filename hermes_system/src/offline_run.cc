@@ -1,0 +1,213 @@
+#include "hermes/system/offline_run.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include "hermes/agent/dataset_feed.h"
+
+namespace hermes::system {
+namespace fs = std::filesystem;
+
+OfflineRun::OfflineRun(SystemParams params, std::unique_ptr<server::Server> server)
+    : params_(std::move(params)), server_(std::move(server)) {}
+
+Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& params,
+                                                         std::vector<AgentSource> agents,
+                                                         const std::string& spool_root,
+                                                         const std::string& base_dir) {
+  if (Status s = params.validate(); !s) return Error{s.error()};
+  if (agents.empty()) return Error{"no agent to run"};
+  auto trace = params.link.makeTrace();
+  if (!trace.ok()) return Error{trace.error()};
+  auto server = server::Server::create(params.server, base_dir);
+  if (!server.ok()) return Error{server.error()};
+  std::unique_ptr<OfflineRun> run(new OfflineRun(params, std::move(*server)));
+  run->link_ = std::make_unique<SharedLink>(*trace, static_cast<int>(agents.size()),
+                                            static_cast<std::uint64_t>(params.link.seed),
+                                            static_cast<std::size_t>(params.link.packet_bytes));
+  run->last_transmitted_.assign(agents.size(), 0);
+  for (std::size_t i = 0; i < agents.size(); ++i) {
+    AgentSource& src = agents[i];
+    if (!src.dataset) return Error{"agent " + src.name + ": no dataset"};
+    if (src.name.empty() || src.name.find_first_of(",\n") != std::string::npos)
+      return Error{"agent name '" + src.name + "' is empty or holds a comma/newline"};
+    for (std::size_t j = 0; j < i; ++j)
+      if (agents[j].name == src.name) return Error{"two agents are named " + src.name};
+    const DatasetInfo& info = src.dataset->info();
+    if (info.frame_count == 0) return Error{"agent " + src.name + ": the dataset holds no frames"};
+    OfflineAgent a;
+    a.name = src.name;
+    a.frames = src.max_frames > 0 ? std::min(src.max_frames, info.frame_count) : info.frame_count;
+    auto first = loadCameraFrame(*src.dataset, 0);
+    if (!first.ok()) return Error{"agent " + src.name + ": frame 0: " + first.error()};
+    a.clock_offset = first->stamp;
+    agent::AgentPipelineParams ap = params.run.agent;
+    ap.uplink.buffer.dir = (fs::path(spool_root) / src.name).string();
+    std::error_code ec;
+    fs::remove_all(ap.uplink.buffer.dir, ec);  // a run starts with an empty spool
+    auto pipeline = agent::AgentPipeline::create(
+        ap, src.name, agent::AgentCamera{info.K, info.baseline, info.T_B_C});
+    if (!pipeline.ok()) return Error{pipeline.error()};
+    OfflineRun* self = run.get();
+    Status s = (*pipeline)->attachUplink(
+        [self, i](std::uint32_t session, std::uint64_t seq, const std::vector<std::uint8_t>& frame) {
+          LinkMessage m;
+          m.sender = static_cast<int>(i);
+          m.id = self->next_message_++;
+          m.bytes = frame.size();
+          m.payload = std::make_shared<const std::vector<std::uint8_t>>(frame);
+          m.send_time = self->now_;
+          self->messages_[m.id] = MessageKey{i, session, seq};
+          self->link_->send(std::move(m), self->now_);
+        },
+        a.clock_offset);
+    if (!s) return Error{s.error()};
+    a.dataset = std::move(src.dataset);
+    a.pipeline = std::move(*pipeline);
+    run->agents_.push_back(std::move(a));
+  }
+  return run;
+}
+
+std::size_t OfflineRun::lostMessages() const {
+  std::size_t n = 0;
+  for (const OfflineAgent& a : agents_) n += a.lost_messages;
+  return n;
+}
+
+void OfflineRun::deliver(double t) {
+  for (LinkDelivery& d : link_->advanceTo(t)) {
+    auto it = messages_.find(d.message.id);
+    if (it == messages_.end()) continue;
+    const MessageKey key = it->second;
+    messages_.erase(it);
+    OfflineAgent& a = agents_[key.agent];
+    if (d.lost) {  // the sender's resend timeout brings it again
+      ++a.lost_messages;
+      continue;
+    }
+    SubmapHeader claimed;
+    claimed.agent = a.pipeline->agentId();
+    claimed.session = key.session;
+    claimed.seq = key.seq;
+    const auto& bytes = *d.message.payload;
+    const ReceiveResult r = server_->onFrame(bytes.data(), bytes.size(), &claimed, d.arrival_time);
+    if (r.verdict == ArrivalVerdict::kAccept || r.verdict == ArrivalVerdict::kDuplicate)
+      a.robot = r.robot;
+    if (!r.acknowledge) continue;
+    const double ack = link_->ackArrival(d.arrival_time);
+    if (ack >= 0) acks_.push_back(PendingAck{ack, key.agent, key.session, key.seq});
+  }
+}
+
+void OfflineRun::acknowledge(double t) {
+  std::stable_sort(acks_.begin(), acks_.end(),
+                   [](const PendingAck& a, const PendingAck& b) { return a.time < b.time; });
+  std::size_t done = 0;
+  for (; done < acks_.size() && acks_[done].time <= t; ++done) {
+    const PendingAck& k = acks_[done];
+    OfflineAgent& a = agents_[k.agent];
+    if (a.pipeline->onAck(k.session, k.seq, t)) ++a.acked;
+  }
+  acks_.erase(acks_.begin(), acks_.begin() + static_cast<std::ptrdiff_t>(done));
+}
+
+Status OfflineRun::feedDueFrames(double t) {
+  while (true) {  // the earliest due frame over all agents first
+    OfflineAgent* next = nullptr;
+    double best = std::numeric_limits<double>::infinity();
+    for (OfflineAgent& a : agents_) {
+      if (a.next >= a.frames) continue;
+      const double ts = a.dataset->frameTime(a.next) - a.clock_offset;
+      if (ts <= t && ts < best) {
+        best = ts;
+        next = &a;
+      }
+    }
+    if (!next) return Status::Ok();
+    auto frame = loadCameraFrame(*next->dataset, next->next);
+    if (!frame.ok())
+      return Error{"agent " + next->name + ": frame " + std::to_string(next->next) + ": " +
+                   frame.error()};
+    auto r = next->pipeline->feed(*frame);
+    if (!r.ok()) return Error{"frame " + std::to_string(next->next) + ": " + r.error()};
+    if (++next->next == next->frames) next->pipeline->flushWindow();  // the last, partial window
+  }
+}
+
+void OfflineRun::sample(double t) {
+  const double period = params_.clock.sample_period_s;
+  const LinkState st = link_->trace().at(next_sample_);
+  std::optional<double> capacity;
+  if (!link_->trace().unlimited()) capacity = st.rate_mbitps * 125.0;  // Mbit/s -> kB/s
+  for (std::size_t i = 0; i < agents_.size(); ++i) {
+    const std::size_t tx = link_->transmittedBytes(static_cast<int>(i));
+    BandwidthSample b;
+    b.time_s = next_sample_;
+    b.agent = agents_[i].name;
+    b.kBps = double(tx - last_transmitted_[i]) / period / 1000.0;
+    b.link_capacity_kBps = capacity;
+    bandwidth_.push_back(b);
+    last_transmitted_[i] = tx;
+    estimates_[agents_[i].name].emplace_back(
+        t, agents_[i].pipeline->uplink()->monitor().estimate(t));
+  }
+}
+
+Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress) {
+  const ClockParams& c = params_.clock;
+  double end_frames = 0;
+  std::size_t total = 0;
+  for (const OfflineAgent& a : agents_) {
+    end_frames = std::max(end_frames, a.dataset->frameTime(a.frames - 1) - a.clock_offset);
+    total += a.frames;
+  }
+  const double end_all = end_frames + c.drain_s;
+  next_sample_ = 0;
+  next_server_ = c.server_period_s;
+  double next_progress = 0;
+  auto backlog = [&] {
+    std::size_t b = 0;
+    for (const OfflineAgent& a : agents_) b += a.pipeline->uplink()->backlogBytes();
+    return b + acks_.size();
+  };
+  for (std::int64_t k = 0;; ++k) {
+    const double t = double(k) * c.step_s;
+    now_ = t;
+    deliver(t);
+    acknowledge(t);
+    for (OfflineAgent& a : agents_) a.pipeline->pollUplink(t);
+    if (Status s = feedDueFrames(t); !s) return s;
+    if (t + 1e-9 >= next_server_) {
+      server_->process(t);
+      next_server_ += c.server_period_s;
+    }
+    while (t + 1e-9 >= next_sample_ + c.sample_period_s) {
+      sample(t);
+      next_sample_ += c.sample_period_s;
+    }
+    const bool frames_left = std::any_of(agents_.begin(), agents_.end(),
+                                         [](const OfflineAgent& a) { return a.next < a.frames; });
+    const bool done = !frames_left && (backlog() == 0 || t >= end_all);
+    if (progress && (t >= next_progress || done)) {
+      ProgressInfo p;
+      p.sim_time = t;
+      p.sim_end = end_frames;
+      for (const OfflineAgent& a : agents_) p.frames_done += a.next;
+      p.frames_total = total;
+      p.merged_submaps = static_cast<int>(server_->counters().merged);
+      p.agents_merged = server_->mapManager().agentsMerged();
+      p.draining = !frames_left;
+      progress(p);
+      next_progress = t + 1.0;
+    }
+    if (done) break;
+  }
+  // Whatever arrived is merged, and the graph is optimised once more.
+  server_->process(now_);
+  return server_->mapManager().optimize();
+}
+
+}  // namespace hermes::system

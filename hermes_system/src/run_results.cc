@@ -1,0 +1,263 @@
+#include "hermes/system/run_results.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "hermes/core/evaluation.h"
+#include "hermes/server/server_outputs.h"
+
+namespace hermes::system {
+namespace fs = std::filesystem;
+
+namespace {
+
+const OfflineAgent* agentOfRobot(const OfflineRun& run, RobotId robot) {
+  for (const OfflineAgent& a : run.agents())
+    if (a.robot && *a.robot == robot) return &a;
+  return nullptr;
+}
+
+Trajectory mergedTrajectory(const OfflineRun& run, const OfflineAgent& a) {
+  if (!a.robot) return {};
+  return server::agentTrajectory(run.server().map(), *a.robot, a.dataset->info().T_B_C);
+}
+
+/// Ground-truth camera pose of `a` at time t (world of the ground truth).
+bool gtCameraPose(const OfflineAgent& a, double t, SE3* T_W_C) {
+  SE3 T_W_B;
+  if (!interpolatePose(a.dataset->info().groundtruth, t, &T_W_B)) return false;
+  *T_W_C = T_W_B * a.dataset->info().T_B_C;
+  return true;
+}
+
+void loopAccuracy(const OfflineRun& run, RunResults* res) {
+  std::vector<double> trans, rot;
+  LoopAccuracy acc;
+  for (const server::LoopEdge& loop : run.server().map().loops) {
+    if (!loop.accepted) continue;
+    const OfflineAgent* a = agentOfRobot(run, loop.a.agent);
+    const OfflineAgent* b = agentOfRobot(run, loop.b.agent);
+    const std::string pair = (a ? a->name : "?") + "-" + (b ? b->name : "?");
+    ++res->loops_per_pair[pair];
+    const server::StoredKeyframe* ka = run.server().map().keyframe(loop.a);
+    const server::StoredKeyframe* kb = run.server().map().keyframe(loop.b);
+    if (!a || !b || !ka || !kb) continue;
+    SE3 Ta, Tb;
+    if (!gtCameraPose(*a, ka->keyframe.stamp, &Ta) || !gtCameraPose(*b, kb->keyframe.stamp, &Tb))
+      continue;
+    const SE3 err = (Ta.inverse() * Tb).inverse() * loop.T_a_b;
+    trans.push_back(err.translation().norm());
+    rot.push_back(eval::relativeAngle(Quat::Identity(), err.quat()) * 180.0 / M_PI);
+    ++acc.loops;
+    if (loop.a.agent != loop.b.agent) ++acc.inter_agent;
+  }
+  if (acc.loops == 0) return;
+  acc.median_trans_m = timing::percentile(trans, 50);
+  acc.p95_trans_m = timing::percentile(trans, 95);
+  acc.max_trans_m = *std::max_element(trans.begin(), trans.end());
+  acc.median_rot_deg = timing::percentile(rot, 50);
+  res->loop_accuracy = acc;
+}
+
+template <typename F>
+Status writeFile(const fs::path& path, F&& body) {
+  std::ofstream out(path);
+  if (!out) return Error{"cannot write " + path.string()};
+  body(out);
+  out.close();
+  if (!out) return Error{"error writing " + path.string()};
+  return Status::Ok();
+}
+
+}  // namespace
+
+RunResults evaluateRun(const OfflineRun& run) {
+  RunResults res;
+  RunMetrics& m = res.metrics;
+  const server::Server& srv = run.server();
+  const RunMetrics sm = server::serverMetrics(srv);
+  m.loops_accepted = sm.loops_accepted;
+  m.loops_rejected = sm.loops_rejected;
+  m.agents_merged = sm.agents_merged;
+  TimingStats timings = srv.timings();
+  const eval::EvalParams& ep = run.params().run.eval;
+  std::vector<eval::AgentTrajectories> merged;
+  std::int64_t bytes_total = 0;
+  for (const OfflineAgent& a : run.agents()) {
+    timings.merge(a.pipeline->timings());
+    AgentMetrics am = a.pipeline->metrics();
+    am.bytes = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
+    bytes_total += *am.bytes;
+    am.submaps_applied = 0;
+    if (a.robot)
+      if (const AgentStats* st = srv.bookkeeper().stats(*a.robot))
+        am.submaps_applied = static_cast<std::int64_t>(st->submaps_applied);
+    const Trajectory& gt = a.dataset->info().groundtruth;
+    if (!gt.empty() && !a.pipeline->trajectory().empty()) {
+      auto ev = eval::evaluateTrajectory(gt, a.pipeline->trajectory(), ep, a.name);
+      if (ev.ok())
+        am.raw_ate_rmse_m = ev->ate.trans_m.rmse;
+      else
+        res.warnings.push_back("raw trajectory of " + a.name + ": " + ev.error());
+    }
+    m.per_agent.push_back(am);
+    Trajectory mt = mergedTrajectory(run, a);
+    if (!gt.empty() && !mt.empty()) merged.push_back({a.name, gt, std::move(mt)});
+  }
+  m.bytes_total = bytes_total;
+  const BandwidthSummary bw = summarizeBandwidth(run.bandwidth());
+  m.kBps_mean = bw.kBps_mean;
+  m.kBps_peak = bw.kBps_peak;
+  m.timings_ms = timings.summary();
+  if (!merged.empty()) {
+    auto ev = eval::evaluateAgents(merged, ep, /*allow_partial=*/true);
+    if (ev.ok()) {
+      fillAccuracy(*ev, ep, &m);
+      for (const eval::AgentFailure& f : ev->failed)
+        res.warnings.push_back("merged trajectory of " + f.name + ": " + f.error);
+    } else {
+      res.warnings.push_back("merged evaluation: " + ev.error());
+    }
+  }
+  loopAccuracy(run, &res);
+  return res;
+}
+
+nlohmann::json resultsJson(const RunResults& res) {
+  nlohmann::json j = res.metrics;
+  if (res.loop_accuracy) {
+    const LoopAccuracy& l = *res.loop_accuracy;
+    j["loop_accuracy"] = {{"loops", l.loops},
+                          {"inter_agent", l.inter_agent},
+                          {"median_trans_m", l.median_trans_m},
+                          {"median_rot_deg", l.median_rot_deg},
+                          {"p95_trans_m", l.p95_trans_m},
+                          {"max_trans_m", l.max_trans_m}};
+  }
+  j["loops_per_pair"] = res.loops_per_pair;
+  if (!res.warnings.empty()) j["warnings"] = res.warnings;
+  return j;
+}
+
+Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::string& out_dir) {
+  const fs::path out(out_dir), traj_dir = out / "trajectories";
+  std::error_code ec;
+  fs::create_directories(traj_dir, ec);
+  if (ec) return Error{"cannot create " + traj_dir.string() + ": " + ec.message()};
+  const eval::EvalParams& ep = run.params().run.eval;
+  std::vector<eval::AgentTrajectories> merged;
+  for (const OfflineAgent& a : run.agents()) {
+    if (Status s = writeTumTrajectory((traj_dir / (a.name + "_raw.tum")).string(),
+                                      a.pipeline->trajectory());
+        !s)
+      return s;
+    Trajectory mt = mergedTrajectory(run, a);
+    if (mt.empty()) continue;
+    if (Status s = writeTumTrajectory((traj_dir / (a.name + "_merged.tum")).string(), mt); !s)
+      return s;
+    if (!a.dataset->info().groundtruth.empty())
+      merged.push_back({a.name, a.dataset->info().groundtruth, std::move(mt)});
+  }
+  if (Status s = writeFile(out / "metrics.json",
+                           [&](std::ostream& o) { o << resultsJson(res).dump(2) << '\n'; });
+      !s)
+    return s;
+  if (Status s = writeBandwidthCsv((out / "bandwidth.csv").string(), run.bandwidth()); !s) return s;
+  if (Status s = writeFile(out / "uplink_estimate.csv",
+                           [&](std::ostream& o) {
+                             o << "time_s,agent,estimate_kBps\n";
+                             for (const auto& [name, series] : run.estimates())
+                               for (const auto& [t, bps] : series)
+                                 o << t << ',' << name << ',' << bps / 1000.0 << '\n';
+                           });
+      !s)
+    return s;
+  // ATE over time: every merged pose's error under the run's one common alignment.
+  std::ostringstream ate;
+  ate << "time_s,agent,error_m\n";
+  if (!merged.empty()) {
+    auto ev = eval::evaluateAgents(merged, ep, true);
+    if (ev.ok())
+      for (const eval::TrajectoryEval& a : ev->agents) {
+        const eval::AteResult r = eval::ateWithAlignment(a.assoc, ev->merged_alignment);
+        const double t0 = [&] {
+          for (const OfflineAgent& o : run.agents())
+            if (o.name == a.name) return o.clock_offset;
+          return 0.0;
+        }();
+        for (std::size_t i = 0; i < r.trans_errors_m.size(); ++i)
+          ate << a.assoc.t[i] - t0 << ',' << a.name << ',' << r.trans_errors_m[i] << '\n';
+      }
+  }
+  if (Status s = writeFile(out / "ate_over_time.csv", [&](std::ostream& o) { o << ate.str(); }); !s)
+    return s;
+  if (Status s = writeFile(out / "loops.csv",
+                           [&](std::ostream& o) {
+                             o << "agent_a,keyframe_a,agent_b,keyframe_b,accepted,tx,ty,tz\n";
+                             for (const server::LoopEdge& l : run.server().map().loops) {
+                               const OfflineAgent* a = agentOfRobot(run, l.a.agent);
+                               const OfflineAgent* b = agentOfRobot(run, l.b.agent);
+                               o << (a ? a->name : "?") << ',' << l.a.id << ','
+                                 << (b ? b->name : "?") << ',' << l.b.id << ','
+                                 << (l.accepted ? 1 : 0) << ',' << l.T_a_b.translation().x()
+                                 << ',' << l.T_a_b.translation().y() << ','
+                                 << l.T_a_b.translation().z() << '\n';
+                             }
+                           });
+      !s)
+    return s;
+  return server::writePly((out / "global_map.ply").string(),
+                          run.server().map().landmarkPositionsWorld(), /*binary=*/true);
+}
+
+std::string formatReport(const OfflineRun& run, const RunResults& res) {
+  const RunMetrics& m = res.metrics;
+  std::ostringstream o;
+  char buf[256];
+  auto cm = [](const std::optional<double>& v) { return v ? *v * 100.0 : std::nan(""); };
+  std::snprintf(buf, sizeof buf, "agents merged %lld/%zu   merged ATE %.2f cm   loops %lld accepted, %lld rejected\n",
+                static_cast<long long>(m.agents_merged.value_or(0)), run.agents().size(),
+                cm(m.ate_rmse_m), static_cast<long long>(m.loops_accepted.value_or(0)),
+                static_cast<long long>(m.loops_rejected.value_or(0)));
+  o << buf;
+  std::snprintf(buf, sizeof buf, "bytes %.1f kB   uplink mean %.1f kB/s   peak %.1f kB/s   link %s\n",
+                double(m.bytes_total.value_or(0)) / 1000.0, m.kBps_mean.value_or(0),
+                m.kBps_peak.value_or(0),
+                run.link().trace().unlimited()
+                    ? "unlimited"
+                    : (run.params().link.trace.empty()
+                           ? (std::to_string(run.params().link.bandwidth_mbitps) + " Mbit/s shared")
+                           : ("trace " + run.params().link.trace))
+                          .c_str());
+  o << buf;
+  for (const AgentMetrics& a : m.per_agent) {
+    std::snprintf(buf, sizeof buf,
+                  "  %-14s raw ATE %6.2f cm  merged ATE %6.2f cm  lost %5.1f %%  submaps sent %lld "
+                  "applied %lld deferred %lld  %.1f kB\n",
+                  a.agent.c_str(), cm(a.raw_ate_rmse_m), cm(a.merged_ate_rmse_m),
+                  100.0 * a.lost_rate.value_or(0), static_cast<long long>(a.submaps_sent.value_or(0)),
+                  static_cast<long long>(a.submaps_applied.value_or(0)),
+                  static_cast<long long>(a.submaps_deferred.value_or(0)),
+                  double(a.bytes.value_or(0)) / 1000.0);
+    o << buf;
+  }
+  if (res.loop_accuracy) {
+    const LoopAccuracy& l = *res.loop_accuracy;
+    std::snprintf(buf, sizeof buf,
+                  "loop accuracy vs ground truth: %zu loops (%zu inter-agent), median %.2f cm / "
+                  "%.3f deg, p95 %.2f cm\n",
+                  l.loops, l.inter_agent, l.median_trans_m * 100, l.median_rot_deg,
+                  l.p95_trans_m * 100);
+    o << buf;
+  }
+  for (const std::string& w : res.warnings) o << "warning: " << w << '\n';
+  return o.str();
+}
+
+}  // namespace hermes::system

@@ -1,0 +1,96 @@
+#include "hermes/system/system_params.h"
+
+#include <cmath>
+
+namespace hermes::system {
+
+Status LinkParams::read(const Config& c) {
+  for (Status s : {c.get("link.bandwidth_mbitps", &bandwidth_mbitps),
+                   c.get("link.latency_ms", &latency_ms), c.get("link.loss", &loss),
+                   c.get("link.trace", &trace), c.get("link.packet_bytes", &packet_bytes),
+                   c.get("link.seed", &seed)})
+    if (!s) return s;
+  return validate();
+}
+
+Status LinkParams::validate() const {
+  if (!(bandwidth_mbitps >= 0) || !std::isfinite(bandwidth_mbitps))
+    return Error{"link.bandwidth_mbitps must be >= 0 (0 = unlimited)"};
+  if (!(latency_ms >= 0) || !std::isfinite(latency_ms)) return Error{"link.latency_ms must be >= 0"};
+  if (!(loss >= 0 && loss < 1)) return Error{"link.loss must be in [0, 1)"};
+  if (packet_bytes < 64) return Error{"link.packet_bytes must be >= 64"};
+  return Status::Ok();
+}
+
+void LinkParams::write(ConfigWriter& w) const {
+  w.set("link.bandwidth_mbitps", bandwidth_mbitps);
+  w.set("link.latency_ms", latency_ms);
+  w.set("link.loss", loss);
+  w.set("link.trace", trace);
+  w.set("link.packet_bytes", packet_bytes);
+  w.set("link.seed", seed);
+}
+
+Expected<LinkTrace> LinkParams::makeTrace() const {
+  if (!trace.empty()) {
+    auto t = LinkTrace::fromCsv(trace);
+    if (!t.ok()) return Error{"link.trace: " + t.error()};
+    return *t;
+  }
+  return LinkTrace::constant(bandwidth_mbitps, latency_ms, loss);
+}
+
+Status ClockParams::read(const Config& c) {
+  for (Status s : {c.get("system.step_s", &step_s), c.get("system.server_period_s", &server_period_s),
+                   c.get("system.sample_period_s", &sample_period_s),
+                   c.get("system.drain_s", &drain_s)})
+    if (!s) return s;
+  return validate();
+}
+
+Status ClockParams::validate() const {
+  if (!(step_s > 0 && step_s <= 0.1)) return Error{"system.step_s must be in (0, 0.1] s"};
+  if (!(server_period_s >= step_s)) return Error{"system.server_period_s must be >= system.step_s"};
+  if (!(sample_period_s >= step_s)) return Error{"system.sample_period_s must be >= system.step_s"};
+  if (!(drain_s >= 0) || !std::isfinite(drain_s)) return Error{"system.drain_s must be >= 0"};
+  return Status::Ok();
+}
+
+void ClockParams::write(ConfigWriter& w) const {
+  w.set("system.step_s", step_s);
+  w.set("system.server_period_s", server_period_s);
+  w.set("system.sample_period_s", sample_period_s);
+  w.set("system.drain_s", drain_s);
+}
+
+Status SystemParams::read(const Config& config) {
+  if (Status s = run.read(config); !s) return s;
+  if (Status s = server.read(config, "server."); !s) return Error{"server: " + s.error()};
+  if (Status s = link.read(config); !s) return s;
+  if (Status s = clock.read(config); !s) return s;
+  return validate();
+}
+
+Status SystemParams::validate() const {
+  for (Status s : {run.validate(), server.validate(), link.validate(), clock.validate()})
+    if (!s) return s;
+  return Status::Ok();
+}
+
+std::string SystemParams::yaml() const {
+  ConfigWriter w;
+  run.write(&w);
+  server.write(w, "server.");
+  link.write(w);
+  clock.write(w);
+  return w.yaml();
+}
+
+Expected<SystemParams> readSystemParams(const Config& config) {
+  SystemParams params;
+  if (Status s = params.read(config); !s) return Error{s.error() + " (in " + config.origin() + ")"};
+  if (Status s = agent::rejectUnreadKeys(config); !s) return Error{s.error()};
+  return params;
+}
+
+}  // namespace hermes::system
