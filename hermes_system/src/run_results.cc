@@ -65,6 +65,12 @@ void loopAccuracy(const OfflineRun& run, RunResults* res) {
   res->loop_accuracy = acc;
 }
 
+std::string fmtNumber(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
 template <typename F>
 Status writeFile(const fs::path& path, F&& body) {
   std::ofstream out(path);
@@ -232,7 +238,7 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
                 run.link().trace().unlimited()
                     ? "unlimited"
                     : (run.params().link.trace.empty()
-                           ? (std::to_string(run.params().link.bandwidth_mbitps) + " Mbit/s shared")
+                           ? (fmtNumber(run.params().link.bandwidth_mbitps) + " Mbit/s shared")
                            : ("trace " + run.params().link.trace))
                           .c_str());
   o << buf;

@@ -1,0 +1,196 @@
+// hermes_bench_system (`./hermes bench system`): the paper's system evaluations
+// on rendered EuRoC-trajectory data (3 robots in one hall), all in-process on
+// the simulated clock. For every (variant, shared bandwidth) pair: agents
+// merged, merged ATE, bytes, kB/s, loops. Variants:
+//   hermes        bandwidth-aware distillation (MILP + coordinator), CSA on, entropy keyframes
+//   fixed_k100    no coordinator, K = 100 landmarks per keyframe (paper Fig. 16)
+//   raw           no distillation: every keyframe and landmark (send-everything baseline)
+//   csa_off       hermes with FIFO instead of the credibility queue (Fig. 17)
+//   covisibility  hermes with covisibility keyframes instead of entropy (Fig. 14)
+// Prints a table on stderr and JSON on stdout (or --json FILE).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "hermes/system/offline_run.h"
+#include "hermes/system/run_results.h"
+
+using namespace hermes;
+namespace fs = std::filesystem;
+
+namespace {
+
+const char* kUsage =
+    "usage: hermes_bench_system [--duration S] [--rate HZ] [--cache DIR]\n"
+    "                           [--bandwidths LIST] [--variants LIST] [--json FILE]\n"
+    "  --duration S     seconds rendered per robot (default 15)\n"
+    "  --rate HZ        camera rate (default 20)\n"
+    "  --cache DIR      rendered data cache (default data_cache/bench_system)\n"
+    "  --bandwidths L   shared link rates in Mbit/s, 0 = unlimited (default 0,30,10,5,1,0.5)\n"
+    "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility (default: all;\n"
+    "                   csa_off and covisibility only at the two lowest bandwidths)\n"
+    "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+const char* kSeqs[] = {"MH_01_easy", "MH_02_easy", "MH_03_medium"};
+
+std::vector<std::string> variantSets(const std::string& v) {
+  if (v == "hermes") return {};
+  if (v == "fixed_k100") return {"distill.coordinator=off", "distill.fixed_k=100"};
+  if (v == "raw") return {"distill.strategy=none"};
+  if (v == "csa_off") return {"server.csa=off"};
+  if (v == "covisibility") return {"keyframe.policy=covisibility"};
+  return {"?"};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  double duration = 15, rate = 20;
+  std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/bench_system";
+  std::vector<std::string> bandwidths = split("0,30,10,5,1,0.5");
+  std::vector<std::string> variants = split("hermes,fixed_k100,raw,csa_off,covisibility");
+  std::string json_out;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "hermes_bench_system: %s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--help" || a == "-h") {
+      std::cout << kUsage;
+      return 0;
+    } else if (a == "--duration") {
+      duration = std::atof(next().c_str());
+    } else if (a == "--rate") {
+      rate = std::atof(next().c_str());
+    } else if (a == "--cache") {
+      cache = next();
+    } else if (a == "--bandwidths") {
+      bandwidths = split(next());
+    } else if (a == "--variants") {
+      variants = split(next());
+    } else if (a == "--json") {
+      json_out = next();
+    } else {
+      std::fprintf(stderr, "hermes_bench_system: unknown argument '%s' (see --help)\n", a.c_str());
+      return 2;
+    }
+  }
+  if (!(duration > 0) || !(rate > 0)) {
+    std::fprintf(stderr, "hermes_bench_system: --duration and --rate must be > 0\n");
+    return 2;
+  }
+  for (const std::string& v : variants)
+    if (variantSets(v) == std::vector<std::string>{"?"}) {
+      std::fprintf(stderr, "hermes_bench_system: unknown variant '%s'\n", v.c_str());
+      return 2;
+    }
+
+  // Rendered data (cached).
+  char key[64];
+  std::snprintf(key, sizeof key, "d%g_r%g", duration, rate);
+  const fs::path data = fs::path(cache) / key;
+  if (!fs::exists(data / "done")) {
+    std::fprintf(stderr, "[bench system] rendering 3 robots x %g s at %g Hz into %s\n", duration,
+                 rate, data.c_str());
+    fs::remove_all(data);
+    const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path();
+    std::string cmd = (bin / "hermes_sim").string();
+    for (const char* s : kSeqs)
+      cmd += std::string(" --trajectory ") + HERMES_SOURCE_DIR + "/config/trajectories/" + s + ".txt";
+    char tail[160];
+    std::snprintf(tail, sizeof tail, " --duration %g --rate %g --seed 1 >/dev/null 2>&1", duration, rate);
+    cmd += " --out " + data.string() + tail;
+    if (std::system(cmd.c_str()) != 0) {
+      std::fprintf(stderr, "hermes_bench_system: rendering failed (%s)\n", cmd.c_str());
+      return 1;
+    }
+    std::ofstream(data / "done") << "ok\n";
+  }
+
+  // The two lowest bandwidths for the ablations.
+  std::vector<std::string> low = bandwidths;
+  std::sort(low.begin(), low.end(), [](const std::string& a, const std::string& b) {
+    const double x = std::atof(a.c_str()), y = std::atof(b.c_str());
+    return (x <= 0 ? 1e9 : x) < (y <= 0 ? 1e9 : y);
+  });
+  if (low.size() > 2) low.resize(2);
+
+  nlohmann::json runs = nlohmann::json::array();
+  std::fprintf(stderr, "%-13s %9s %7s %10s %9s %9s %7s %8s\n", "variant", "Mbit/s", "merged",
+               "ATE [cm]", "kB", "kB/s", "loops", "wall [s]");
+  for (const std::string& v : variants) {
+    const bool ablation = v == "csa_off" || v == "covisibility";
+    for (const std::string& bw : bandwidths) {
+      if (ablation && std::find(low.begin(), low.end(), bw) == low.end()) continue;
+      std::vector<std::string> sets = variantSets(v);
+      sets.push_back("link.bandwidth_mbitps=" + bw);
+      sets.push_back("uplink.buffer.fsync=false");
+      auto config = agent::loadRunConfig("", sets);
+      if (!config.ok()) return std::fprintf(stderr, "%s\n", config.error().c_str()), 1;
+      auto params = system::readSystemParams(*config);
+      if (!params.ok()) return std::fprintf(stderr, "%s\n", params.error().c_str()), 1;
+      std::vector<system::AgentSource> sources;
+      for (const char* s : kSeqs) {
+        auto ds = Dataset::open((data / s).string(), params->run.dataset);
+        if (!ds.ok()) return std::fprintf(stderr, "%s\n", ds.error().c_str()), 1;
+        sources.push_back({s, std::move(*ds), 0});
+      }
+      const std::string spool = (fs::temp_directory_path() / "hermes_bench_system_spool").string();
+      auto run = system::OfflineRun::create(*params, std::move(sources), spool, HERMES_SOURCE_DIR);
+      if (!run.ok()) return std::fprintf(stderr, "%s\n", run.error().c_str()), 1;
+      const auto t0 = std::chrono::steady_clock::now();
+      if (Status s = (*run)->run(); !s) return std::fprintf(stderr, "%s\n", s.error().c_str()), 1;
+      const double wall =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const system::RunResults r = system::evaluateRun(**run);
+      nlohmann::json j = system::resultsJson(r);
+      j["variant"] = v;
+      j["bandwidth_mbitps"] = std::atof(bw.c_str());
+      j["wall_s"] = wall;
+      j["lost_messages"] = (*run)->lostMessages();
+      runs.push_back(j);
+      const RunMetrics& m = r.metrics;
+      std::fprintf(stderr, "%-13s %9s %4lld/3 %10.2f %9.1f %9.1f %7lld %8.1f\n", v.c_str(),
+                   std::atof(bw.c_str()) <= 0 ? "unlim" : bw.c_str(),
+                   static_cast<long long>(m.agents_merged.value_or(0)),
+                   m.ate_rmse_m ? *m.ate_rmse_m * 100 : std::nan(""),
+                   double(m.bytes_total.value_or(0)) / 1000.0, m.kBps_mean.value_or(0),
+                   static_cast<long long>(m.loops_accepted.value_or(0)), wall);
+    }
+  }
+  nlohmann::json out = {{"bench", "system"},
+                        {"data", data.string()},
+                        {"duration_s", duration},
+                        {"rate_hz", rate},
+                        {"runs", runs}};
+  if (json_out.empty()) {
+    std::cout << out.dump(2) << "\n";
+  } else {
+    std::ofstream f(json_out);
+    f << out.dump(2) << "\n";
+    if (!f) return std::fprintf(stderr, "cannot write %s\n", json_out.c_str()), 1;
+  }
+  return 0;
+}
