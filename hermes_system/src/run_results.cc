@@ -54,6 +54,7 @@ void loopAccuracy(const OfflineRun& run, RunResults* res) {
     const SE3 err = (Ta.inverse() * Tb).inverse() * loop.T_a_b;
     trans.push_back(err.translation().norm());
     rot.push_back(eval::relativeAngle(Quat::Identity(), err.quat()) * 180.0 / M_PI);
+    if (trans.back() > 0.1 || rot.back() > 2.0) ++acc.wrong;
     ++acc.loops;
     if (loop.a.agent != loop.b.agent) ++acc.inter_agent;
   }
@@ -144,7 +145,9 @@ nlohmann::json resultsJson(const RunResults& res) {
                           {"median_trans_m", l.median_trans_m},
                           {"median_rot_deg", l.median_rot_deg},
                           {"p95_trans_m", l.p95_trans_m},
-                          {"max_trans_m", l.max_trans_m}};
+                          {"max_trans_m", l.max_trans_m},
+                          {"wrong", l.wrong},
+                          {"precision", 1.0 - double(l.wrong) / double(l.loops)}};
   }
   j["loops_per_pair"] = res.loops_per_pair;
   if (!res.warnings.empty()) j["warnings"] = res.warnings;
@@ -257,9 +260,9 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
     const LoopAccuracy& l = *res.loop_accuracy;
     std::snprintf(buf, sizeof buf,
                   "loop accuracy vs ground truth: %zu loops (%zu inter-agent), median %.2f cm / "
-                  "%.3f deg, p95 %.2f cm\n",
+                  "%.3f deg, p95 %.2f cm, %zu off by > 10 cm or 2 deg\n",
                   l.loops, l.inter_agent, l.median_trans_m * 100, l.median_rot_deg,
-                  l.p95_trans_m * 100);
+                  l.p95_trans_m * 100, l.wrong);
     o << buf;
   }
   for (const std::string& w : res.warnings) o << "warning: " << w << '\n';

@@ -7,6 +7,8 @@
 //   raw           no distillation: every keyframe and landmark (send-everything baseline)
 //   csa_off       hermes with FIFO instead of the credibility queue (Fig. 17)
 //   covisibility  hermes with covisibility keyframes instead of entropy (Fig. 14)
+//   false_candidates  hermes with 20 % of place-recognition candidates replaced by
+//                 random keyframes of other agents: PCM must keep every false loop out
 // Prints a table on stderr and JSON on stdout (or --json FILE).
 #include <algorithm>
 #include <chrono>
@@ -16,6 +18,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -37,8 +41,9 @@ const char* kUsage =
     "  --rate HZ        camera rate (default 20)\n"
     "  --cache DIR      rendered data cache (default data_cache/bench_system)\n"
     "  --bandwidths L   shared link rates in Mbit/s, 0 = unlimited (default 0,30,10,5,1,0.5)\n"
-    "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility (default: all;\n"
-    "                   csa_off and covisibility only at the two lowest bandwidths)\n"
+    "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility,false_candidates\n"
+    "                   (default: all; the last three only at the two lowest bandwidths,\n"
+    "                   false_candidates only unlimited)\n"
     "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
 
 std::vector<std::string> split(const std::string& s) {
@@ -57,7 +62,29 @@ std::vector<std::string> variantSets(const std::string& v) {
   if (v == "raw") return {"distill.strategy=none"};
   if (v == "csa_off") return {"server.csa=off"};
   if (v == "covisibility") return {"keyframe.policy=covisibility"};
+  if (v == "false_candidates") return {};
   return {"?"};
+}
+
+/// Replaces a `fraction` of the place candidates (seeded draw) by a random keyframe
+/// of another agent: what a poor place recogniser would propose.
+void injectFalseCandidates(system::OfflineRun& run, double fraction, std::size_t* injected) {
+  server::MapManager& mm = run.server().mapManager();
+  auto rng = std::make_shared<std::mt19937_64>(7);
+  mm.setCandidateHook([&mm, rng, fraction, injected](const KeyframeKey& query,
+                                                     std::vector<PlaceCandidate>* c) {
+    std::uniform_real_distribution<double> u(0, 1);
+    for (PlaceCandidate& cand : *c) {
+      if (u(*rng) >= fraction) continue;
+      std::vector<KeyframeKey> others;
+      for (const auto& [id, traj] : mm.map().trajectories)
+        if (traj.agent != query.agent)
+          for (const auto& [kid, kf] : traj.keyframes) others.push_back({traj.agent, traj.session, kid});
+      if (others.empty()) continue;
+      cand.key = others[std::uniform_int_distribution<std::size_t>(0, others.size() - 1)(*rng)];
+      ++*injected;
+    }
+  });
 }
 
 }  // namespace
@@ -66,7 +93,8 @@ int main(int argc, char** argv) {
   double duration = 15, rate = 20;
   std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/bench_system";
   std::vector<std::string> bandwidths = split("0,30,10,5,1,0.5");
-  std::vector<std::string> variants = split("hermes,fixed_k100,raw,csa_off,covisibility");
+  std::vector<std::string> variants =
+      split("hermes,fixed_k100,raw,csa_off,covisibility,false_candidates");
   std::string json_out;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -141,9 +169,10 @@ int main(int argc, char** argv) {
   std::fprintf(stderr, "%-13s %9s %7s %10s %9s %9s %7s %8s\n", "variant", "Mbit/s", "merged",
                "ATE [cm]", "kB", "kB/s", "loops", "wall [s]");
   for (const std::string& v : variants) {
-    const bool ablation = v == "csa_off" || v == "covisibility";
+    const bool ablation = v == "csa_off" || v == "covisibility";  // low bandwidths only
     for (const std::string& bw : bandwidths) {
       if (ablation && std::find(low.begin(), low.end(), bw) == low.end()) continue;
+      if (v == "false_candidates" && std::atof(bw.c_str()) > 0) continue;
       std::vector<std::string> sets = variantSets(v);
       sets.push_back("link.bandwidth_mbitps=" + bw);
       sets.push_back("uplink.buffer.fsync=false");
@@ -160,6 +189,8 @@ int main(int argc, char** argv) {
       const std::string spool = (fs::temp_directory_path() / "hermes_bench_system_spool").string();
       auto run = system::OfflineRun::create(*params, std::move(sources), spool, HERMES_SOURCE_DIR);
       if (!run.ok()) return std::fprintf(stderr, "%s\n", run.error().c_str()), 1;
+      std::size_t injected = 0;
+      if (v == "false_candidates") injectFalseCandidates(**run, 0.2, &injected);
       const auto t0 = std::chrono::steady_clock::now();
       if (Status s = (*run)->run(); !s) return std::fprintf(stderr, "%s\n", s.error().c_str()), 1;
       const double wall =
@@ -170,6 +201,7 @@ int main(int argc, char** argv) {
       j["bandwidth_mbitps"] = std::atof(bw.c_str());
       j["wall_s"] = wall;
       j["lost_messages"] = (*run)->lostMessages();
+      if (v == "false_candidates") j["injected_false_candidates"] = injected;
       runs.push_back(j);
       const RunMetrics& m = r.metrics;
       std::fprintf(stderr, "%-13s %9s %4lld/3 %10.2f %9.1f %9.1f %7lld %8.1f\n", v.c_str(),

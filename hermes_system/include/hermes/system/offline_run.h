@@ -67,6 +67,8 @@ class OfflineRun {
 
   const std::vector<OfflineAgent>& agents() const { return agents_; }
   const server::Server& server() const { return *server_; }
+  /// For test/bench hooks (MapManager::setCandidateHook) before run().
+  server::Server& server() { return *server_; }
   const SharedLink& link() const { return *link_; }
   const std::vector<BandwidthSample>& bandwidth() const { return bandwidth_; }
   /// Per agent: (sim time, bandwidth estimate [B/s]) at each bandwidth sample.

@@ -29,6 +29,7 @@ struct LoopAccuracy {
   std::size_t inter_agent = 0;
   double median_trans_m = 0, median_rot_deg = 0;
   double p95_trans_m = 0, max_trans_m = 0;
+  std::size_t wrong = 0;            ///< accepted loops off by > 0.1 m or > 2 deg (false loops)
 };
 
 struct RunResults {
