@@ -52,7 +52,16 @@ void UplinkSender::poll(double now) {
     BufferedSubmap* next = buffer_.nextToSend(now);
     if (!next) return;
     const auto key = std::make_pair(next->session, next->seq);
-    // A resend replaces the earlier attempt, which is presumed lost.
+    // A resend replaces the earlier attempt, which is presumed lost -- unless the
+    // link may simply still be busy with it: at the estimated rate, everything in
+    // flight up to and including it needs in_flight / rate seconds, and resending
+    // into a slow link only adds to the congestion.
+    if (auto it = in_flight_.find(key); it != in_flight_.end()) {
+      const double rate = monitor_.estimate(now);
+      const double busy_s = rate > 0 ? static_cast<double>(in_flight) / rate : 0.0;
+      if (!monitor_.outage(now) && now - next->last_sent < p_.buffer.resend_timeout_s + busy_s)
+        return;
+    }
     if (auto it = in_flight_.find(key); it != in_flight_.end()) {
       in_flight -= it->second;
       monitor_.onGiveUp(send_ids_[key]);
