@@ -35,8 +35,8 @@ TEST(SubmapReceiver, ExactlyOnceOverRosTopics) {
   ros::NodeHandle nh;
   std::vector<hermes_msgs::SubmapAck> acks;
   auto sub = nh.subscribe<hermes_msgs::SubmapAck>(
-      "submap_ack", 100, [&](const hermes_msgs::SubmapAckConstPtr& a) { acks.push_back(*a); });
-  auto pub = nh.advertise<hermes_msgs::EncodedSubmap>("submap", 100);
+      "/hermes/submap_ack", 100, [&](const hermes_msgs::SubmapAckConstPtr& a) { acks.push_back(*a); });
+  auto pub = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 100);
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(30.0);
   while ((pub.getNumSubscribers() == 0 || sub.getNumPublishers() == 0) && ros::WallTime::now() < deadline)
     ros::WallDuration(0.05).sleep();

@@ -107,7 +107,7 @@ void AgentPipeline::windowStep(double stamp) {
     runWindowStep(tracker_, *distiller_, monitor_, stamp, &windows_, &timings_);
     return;
   }
-  const double now = last_stamp_ - clock_offset_;
+  const double now = uplink_clock_ ? uplink_clock_() : last_stamp_ - clock_offset_;
   WindowSink sink;
   sink.link_now = now;
   sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());

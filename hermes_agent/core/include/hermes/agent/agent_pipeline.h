@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -67,6 +68,9 @@ class AgentPipeline {
   /// `clock_offset_s` (the offline runner's simulated clock starts at 0 for every
   /// agent). Call once, before the first frame. Errors: spool cannot be opened.
   Status attachUplink(UplinkSender::Transport transport, double clock_offset_s = 0);
+  /// Replaces the stamp-based uplink clock by `clock` (e.g. wall time in a ROS
+  /// node, where frame stamps and the network need not advance together).
+  void setUplinkClock(std::function<double()> clock) { uplink_clock_ = std::move(clock); }
   /// Server acknowledgement at uplink time `now` (duplicates are fine).
   Status onAck(std::uint32_t session, std::uint64_t seq, double now);
   /// Lets the uplink send what it may at uplink time `now` (feed() also does).
@@ -98,6 +102,7 @@ class AgentPipeline {
   std::uint32_t session_ = 1;
   std::unique_ptr<UplinkSender> uplink_;
   double clock_offset_ = 0;
+  std::function<double()> uplink_clock_;
   int loop_closures_ = 0;
   std::optional<std::pair<std::uint32_t, std::uint64_t>> last_window_;  ///< last submitted
   bool last_window_acked_ = false;

@@ -1,0 +1,180 @@
+// rostest: three agents (DatasetPlayer + Agent nodelets) and hermes_server_node
+// over real ROS topics on rendered data. Checks that every submap an agent sent
+// was accepted exactly once, that all three maps merged into one frame, and the
+// merged keyframe paths against the rendered ground truth.
+#include <gtest/gtest.h>
+#include <hermes_msgs/AgentHeartbeat.h>
+#include <hermes_msgs/EncodedSubmap.h>
+#include <hermes_msgs/SubmapAck.h>
+#include <nav_msgs/Odometry.h>
+#include <nav_msgs/Path.h>
+#include <ros/ros.h>
+#include <std_msgs/Empty.h>
+#include <std_msgs/String.h>
+
+#include <map>
+#include <mutex>
+#include <set>
+#include <tuple>
+
+#include <nlohmann/json.hpp>
+
+#include "hermes/core/dataset.h"
+#include "hermes/core/evaluation.h"
+
+namespace {
+
+using Key = std::tuple<std::string, std::uint32_t, std::uint64_t>;
+const std::map<std::string, std::string> kSequence = {
+    {"agent0", "MH_01_easy"}, {"agent1", "MH_02_easy"}, {"agent2", "MH_03_medium"}};
+
+struct Observed {
+  std::mutex mu;
+  std::map<Key, int> sent, accepted;
+  int duplicates = 0, rejected = 0, done = 0;
+  std::map<std::string, std::string> name_of_uuid;
+  std::map<std::uint32_t, std::string> uuid_of_robot;
+  std::map<std::uint32_t, nav_msgs::Path> paths;
+  std::map<std::string, hermes::Trajectory> odom;  ///< per robot, body poses (odometry frame)
+  std::string status;
+};
+
+hermes::Trajectory toTrajectory(const nav_msgs::Path& path) {
+  hermes::Trajectory t;
+  for (const auto& p : path.poses) {
+    const auto& q = p.pose.orientation;
+    const hermes::SE3 T(hermes::Quat(q.w, q.x, q.y, q.z).normalized(),
+                        hermes::Vec3(p.pose.position.x, p.pose.position.y, p.pose.position.z));
+    t.push_back(hermes::StampedPose{p.header.stamp.toSec(), T});
+  }
+  return t;
+}
+
+}  // namespace
+
+TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
+  ros::NodeHandle nh, pnh("~");
+  std::string data;
+  ASSERT_TRUE(pnh.getParam("data", data)) << "~data (rendered folder) is required";
+  Observed o;
+  std::vector<ros::Subscriber> subs;
+  subs.push_back(nh.subscribe<hermes_msgs::EncodedSubmap>(
+      "/hermes/submap", 100, [&](const hermes_msgs::EncodedSubmapConstPtr& m) {
+        std::lock_guard<std::mutex> l(o.mu);
+        ++o.sent[Key{m->agent_uuid, m->session, m->seq}];
+      }));
+  subs.push_back(nh.subscribe<hermes_msgs::SubmapAck>(
+      "/hermes/submap_ack", 100, [&](const hermes_msgs::SubmapAckConstPtr& a) {
+        std::lock_guard<std::mutex> l(o.mu);
+        if (a->status == hermes_msgs::SubmapAck::ACCEPTED) ++o.accepted[Key{a->agent_uuid, a->session, a->seq}];
+        if (a->status == hermes_msgs::SubmapAck::DUPLICATE) ++o.duplicates;
+        if (a->status == hermes_msgs::SubmapAck::REJECTED) ++o.rejected;
+        o.uuid_of_robot[a->robot_id] = a->agent_uuid;
+      }));
+  subs.push_back(nh.subscribe<hermes_msgs::AgentHeartbeat>(
+      "/hermes/heartbeat", 10, [&](const hermes_msgs::AgentHeartbeatConstPtr& h) {
+        std::lock_guard<std::mutex> l(o.mu);
+        o.name_of_uuid[h->agent_uuid] = h->name;
+      }));
+  subs.push_back(nh.subscribe<std_msgs::String>("/hermes/status", 5, [&](const std_msgs::StringConstPtr& s) {
+    std::lock_guard<std::mutex> l(o.mu);
+    o.status = s->data;
+  }));
+  for (const auto& [robot, seq] : kSequence)
+    subs.push_back(nh.subscribe<nav_msgs::Odometry>(
+        "/" + robot + "/odom", 100, [&o, robot = robot](const nav_msgs::OdometryConstPtr& m) {
+          const auto& q = m->pose.pose.orientation;
+          const auto& p = m->pose.pose.position;
+          std::lock_guard<std::mutex> l(o.mu);
+          o.odom[robot].push_back(hermes::StampedPose{
+              m->header.stamp.toSec(),
+              hermes::SE3(hermes::Quat(q.w, q.x, q.y, q.z), hermes::Vec3(p.x, p.y, p.z))});
+        }));
+  for (const auto& [robot, seq] : kSequence)
+    subs.push_back(nh.subscribe<std_msgs::Empty>("/" + robot + "/done", 1, [&](const std_msgs::EmptyConstPtr&) {
+      std::lock_guard<std::mutex> l(o.mu);
+      ++o.done;
+    }));
+  for (std::uint32_t r = 0; r < 3; ++r)
+    subs.push_back(nh.subscribe<nav_msgs::Path>(
+        "/hermes/path/" + std::to_string(r), 1, [&o, r](const nav_msgs::PathConstPtr& p) {
+          std::lock_guard<std::mutex> l(o.mu);
+          o.paths[r] = *p;
+        }));
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+
+  // Wait for the sequences to end, then for every submap to be acknowledged and
+  // the server to report three merged agents.
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(240.0);
+  ros::WallTime all_done;
+  bool finished = false;
+  while (ros::WallTime::now() < deadline && !finished) {
+    ros::WallDuration(0.5).sleep();
+    std::lock_guard<std::mutex> l(o.mu);
+    if (o.done < 3) continue;
+    if (all_done.isZero()) all_done = ros::WallTime::now();
+    bool all_acked = !o.sent.empty();
+    for (const auto& [k, n] : o.sent) all_acked = all_acked && o.accepted.count(k);
+    const auto j = nlohmann::json::parse(o.status.empty() ? "{}" : o.status, nullptr, false);
+    const bool merged = j.is_object() && j.value("agents_merged", 0) == 3;
+    finished = all_acked && merged && o.paths.size() == 3 &&
+               ros::WallTime::now() - all_done > ros::WallDuration(5.0);
+  }
+  spinner.stop();
+  std::lock_guard<std::mutex> l(o.mu);
+  std::printf("sent %zu distinct submaps, duplicates acked %d, rejected %d, status %s\n",
+              o.sent.size(), o.duplicates, o.rejected, o.status.c_str());
+  ASSERT_EQ(o.done, 3) << "not every player finished";
+  EXPECT_EQ(o.rejected, 0);
+  std::set<std::string> agents;
+  for (const auto& [k, n] : o.sent) {
+    agents.insert(std::get<0>(k));
+    EXPECT_EQ(o.accepted.count(k) ? o.accepted.at(k) : 0, 1)
+        << "submap " << std::get<0>(k) << " seq " << std::get<2>(k) << " not accepted exactly once";
+  }
+  for (const auto& [k, n] : o.accepted) EXPECT_TRUE(o.sent.count(k)) << "accepted a submap never sent";
+  EXPECT_EQ(agents.size(), 3u);
+  const auto status = nlohmann::json::parse(o.status, nullptr, false);
+  ASSERT_TRUE(status.is_object()) << o.status;
+  EXPECT_EQ(status.value("agents_merged", 0), 3);
+  int applied = 0;
+  for (const auto& a : status["per_agent"]) applied += a.value("submaps_applied", 0);
+  EXPECT_EQ(applied, static_cast<int>(o.sent.size()));
+
+  // Each agent's published odometry (body poses) against its ground truth.
+  for (const auto& [robot, seq] : kSequence) {
+    auto ds = hermes::Dataset::open(data + "/" + seq, hermes::DatasetParams{});
+    ASSERT_TRUE(ds.ok()) << ds.error();
+    const hermes::Trajectory& est = o.odom[robot];
+    EXPECT_GE(est.size(), (*ds)->info().frame_count * 8 / 10) << robot << ": odometry for too few frames";
+    auto ev = hermes::eval::evaluateTrajectory((*ds)->info().groundtruth, est, hermes::eval::EvalParams{}, robot);
+    ASSERT_TRUE(ev.ok()) << ev.error();
+    std::printf("%s odometry: %zu poses, ATE %.4f m\n", robot.c_str(), est.size(), ev->ate.trans_m.rmse);
+    EXPECT_LT(ev->ate.trans_m.rmse, 0.05) << robot;
+  }
+
+  // Merged keyframe paths (camera poses, world frame) vs rendered ground truth,
+  // one common SE(3) alignment for all agents.
+  std::vector<hermes::eval::AgentTrajectories> trajs;
+  for (const auto& [robot, path] : o.paths) {
+    ASSERT_TRUE(o.uuid_of_robot.count(robot));
+    const std::string name = o.name_of_uuid[o.uuid_of_robot[robot]];
+    ASSERT_TRUE(kSequence.count(name)) << "unknown agent name '" << name << "'";
+    auto ds = hermes::Dataset::open(data + "/" + kSequence.at(name), hermes::DatasetParams{});
+    ASSERT_TRUE(ds.ok()) << ds.error();
+    const hermes::DatasetInfo& info = (*ds)->info();
+    trajs.push_back({name, hermes::transformTrajectory(info.groundtruth, info.T_B_C), toTrajectory(path)});
+  }
+  hermes::eval::EvalParams ep;
+  auto ev = hermes::eval::evaluateAgents(trajs, ep);
+  ASSERT_TRUE(ev.ok()) << ev.error();
+  std::printf("merged ATE %.4f m over %zu keyframes\n", ev->merged_ate.trans_m.rmse, ev->matched);
+  EXPECT_LT(ev->merged_ate.trans_m.rmse, 0.10);
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_multi_agent");
+  return RUN_ALL_TESTS();
+}
