@@ -7,6 +7,8 @@
 //        /hermes/path/<robot id> (nav_msgs/Path of merged keyframes, frame "world")
 //        /hermes/global_map (sensor_msgs/PointCloud2, frame "world", latched)
 //        /hermes/loops (visualization_msgs/Marker LINE_LIST of accepted loops)
+//        TF world -> <robot name>/odom (1 Hz) for every anchored agent (the name from
+//        its heartbeat, else agent_<id>); world itself is always published
 // Threading: one spinner thread; acks are sent in the submap callback, merging
 // runs from a timer one submap per tick, so an ack waits at most one merge.
 // Params: ~config (YAML, default config/hermes.yaml of the source tree),
@@ -20,6 +22,7 @@
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_msgs/String.h>
+#include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/Marker.h>
 
 #include <filesystem>
@@ -144,11 +147,44 @@ class ServerNode {
       ROS_INFO("hermes_server: agent %s is '%s'", h->agent_uuid.c_str(), h->name.c_str());
   }
 
+  /// world -> <robot>/odom of the anchored agents' current sessions.
+  void publishFrames(const std_msgs::Header& h) {
+    std::vector<geometry_msgs::TransformStamped> tfs;
+    for (const auto& [id, traj] : server_->map().trajectories) {
+      const hermes::AgentStats* st = server_->bookkeeper().stats(traj.agent);
+      if (!traj.anchored || !st || st->current_session != traj.session) continue;
+      const auto name = names_.find(hermes::toString(traj.uuid));
+      geometry_msgs::TransformStamped tf;
+      tf.header = h;
+      tf.child_frame_id = (name != names_.end() ? name->second : "agent_" + std::to_string(traj.agent)) + "/odom";
+      const geometry_msgs::Pose p = toPose(traj.T_W_A);
+      tf.transform.translation.x = p.position.x;
+      tf.transform.translation.y = p.position.y;
+      tf.transform.translation.z = p.position.z;
+      tf.transform.rotation = p.orientation;
+      tfs.push_back(tf);
+    }
+    if (tfs.empty()) {  // the fixed frame exists before any agent is anchored
+      geometry_msgs::TransformStamped tf;
+      tf.header = h;
+      tf.child_frame_id = "hermes_origin";
+      tf.transform.rotation.w = 1.0;
+      tfs.push_back(tf);
+    }
+    tf_.sendTransform(tfs);
+  }
+
   void publishOutputs() {
     std_msgs::String status;
     status.data = hermes::metricsToJsonString(hermes::server::serverMetrics(*server_), -1);
     status_pub_.publish(status);
-    if (!dirty_) return;
+    if (!dirty_) {
+      std_msgs::Header h;
+      h.frame_id = "world";
+      h.stamp = ros::Time::now();
+      publishFrames(h);
+      return;
+    }
     dirty_ = false;
     const hermes::server::GlobalMap& map = server_->map();
     std_msgs::Header h;
@@ -175,6 +211,7 @@ class ServerNode {
       it->second.publish(path);
     }
     map_pub_.publish(toCloud(map.landmarkPositionsWorld(), h));
+    publishFrames(h);
     visualization_msgs::Marker loops;
     loops.header = h;
     loops.ns = "loops";
@@ -202,6 +239,7 @@ class ServerNode {
   std::map<std::string, std::string> names_;
   ros::Subscriber submap_sub_, hb_sub_;
   ros::WallTimer process_timer_, publish_timer_;
+  tf2_ros::TransformBroadcaster tf_;
   bool dirty_ = false;
 };
 
