@@ -36,6 +36,9 @@ function(hermes_module)
       add_library(${M_NAME}_testsupport STATIC ${support})
       target_include_directories(${M_NAME}_testsupport PUBLIC ${M_DIR}/test/support)
       target_link_libraries(${M_NAME}_testsupport PUBLIC ${M_NAME} GTest::gtest)
+      target_compile_definitions(${M_NAME}_testsupport PRIVATE
+        HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
+        HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data")
     endif()
     file(GLOB tests CONFIGURE_DEPENDS ${M_DIR}/test/test_*.cc)
     foreach(t ${tests})

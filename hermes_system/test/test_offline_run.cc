@@ -7,37 +7,15 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <unistd.h>
 
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
+#include "support/rendered_hall.h"
 
 using namespace hermes;
 namespace fs = std::filesystem;
 
 namespace {
-
-const char* kSeqs[] = {"MH_01_easy", "MH_02_easy", "MH_03_medium"};
-
-/// Renders (once per machine: cached under the temp dir) 3 robots x 10 s at 10 Hz.
-std::string renderedHall() {
-  const fs::path dir = fs::temp_directory_path() / "hermes_test_cache" / "hall_d10_r10_s1";
-  if (fs::exists(dir / "done")) return dir.string();
-  const fs::path tmp = dir.string() + ".tmp" + std::to_string(::getpid());
-  fs::remove_all(tmp);
-  const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path().parent_path() / "bin";
-  std::string cmd = (bin / "hermes_sim").string();
-  for (const char* s : kSeqs)
-    cmd += std::string(" --trajectory ") + HERMES_SOURCE_DIR + "/config/trajectories/" + s + ".txt";
-  cmd += " --out " + tmp.string() + " --duration 10 --rate 10 --seed 1 >/dev/null 2>&1";
-  if (std::system(cmd.c_str()) != 0) return "";
-  std::ofstream(tmp / "done") << "ok\n";
-  std::error_code ec;
-  fs::create_directories(dir.parent_path(), ec);
-  fs::rename(tmp, dir, ec);  // another process may have won the race: fine
-  if (ec) fs::remove_all(tmp);
-  return fs::exists(dir / "done") ? dir.string() : "";
-}
 
 system::SystemParams baseParams() {
   system::SystemParams p;
@@ -47,10 +25,10 @@ system::SystemParams baseParams() {
 
 std::unique_ptr<system::OfflineRun> makeRun(const system::SystemParams& params,
                                             const std::string& tag) {
-  const std::string hall = renderedHall();
+  const std::string hall = test_support::renderedHall();
   EXPECT_FALSE(hall.empty()) << "rendering failed";
   std::vector<system::AgentSource> sources;
-  for (const char* s : kSeqs) {
+  for (const std::string& s : test_support::hallSequences()) {
     auto ds = Dataset::open(hall + "/" + s, params.run.dataset);
     EXPECT_TRUE(ds.ok()) << ds.error();
     if (!ds.ok()) return nullptr;
