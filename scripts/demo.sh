@@ -45,7 +45,7 @@ GT_DIR="$ROOT/config/trajectories"   # shipped EuRoC ground truth (see its READM
 
 T0=$SECONDS
 echo "[demo] set-up and build (ROS-free tools; first time: several minutes)"
-"$HERMES" build --no-ros >/dev/null   # installs what is missing first
+"$HERMES" build --no-ros --target hermes_sim --target hermes_run >/dev/null   # installs what is missing first
 BIN="$ROOT/build-noros/bin"
 mkdir -p "$OUT" "$CACHE"
 
