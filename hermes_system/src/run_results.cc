@@ -36,6 +36,30 @@ bool gtCameraPose(const OfflineAgent& a, double t, SE3* T_W_C) {
   return true;
 }
 
+/// A loop against ground truth: its error and the true distance between the two views.
+struct LoopCheck {
+  double err_m = 0, err_deg = 0, gt_distance_m = 0, stamp_a = 0, stamp_b = 0;
+};
+
+std::optional<LoopCheck> checkLoop(const OfflineRun& run, const server::LoopEdge& loop) {
+  const OfflineAgent* a = agentOfRobot(run, loop.a.agent);
+  const OfflineAgent* b = agentOfRobot(run, loop.b.agent);
+  const server::StoredKeyframe* ka = run.server().map().keyframe(loop.a);
+  const server::StoredKeyframe* kb = run.server().map().keyframe(loop.b);
+  if (!a || !b || !ka || !kb) return std::nullopt;
+  SE3 Ta, Tb;
+  if (!gtCameraPose(*a, ka->keyframe.stamp, &Ta) || !gtCameraPose(*b, kb->keyframe.stamp, &Tb))
+    return std::nullopt;
+  const SE3 err = (Ta.inverse() * Tb).inverse() * loop.T_a_b;
+  LoopCheck c;
+  c.err_m = err.translation().norm();
+  c.err_deg = eval::relativeAngle(Quat::Identity(), err.quat()) * 180.0 / M_PI;
+  c.gt_distance_m = (Ta.translation() - Tb.translation()).norm();
+  c.stamp_a = ka->keyframe.stamp;
+  c.stamp_b = kb->keyframe.stamp;
+  return c;
+}
+
 void loopAccuracy(const OfflineRun& run, RunResults* res) {
   std::vector<double> trans, rot;
   LoopAccuracy acc;
@@ -43,18 +67,12 @@ void loopAccuracy(const OfflineRun& run, RunResults* res) {
     if (!loop.accepted) continue;
     const OfflineAgent* a = agentOfRobot(run, loop.a.agent);
     const OfflineAgent* b = agentOfRobot(run, loop.b.agent);
-    const std::string pair = (a ? a->name : "?") + "-" + (b ? b->name : "?");
-    ++res->loops_per_pair[pair];
-    const server::StoredKeyframe* ka = run.server().map().keyframe(loop.a);
-    const server::StoredKeyframe* kb = run.server().map().keyframe(loop.b);
-    if (!a || !b || !ka || !kb) continue;
-    SE3 Ta, Tb;
-    if (!gtCameraPose(*a, ka->keyframe.stamp, &Ta) || !gtCameraPose(*b, kb->keyframe.stamp, &Tb))
-      continue;
-    const SE3 err = (Ta.inverse() * Tb).inverse() * loop.T_a_b;
-    trans.push_back(err.translation().norm());
-    rot.push_back(eval::relativeAngle(Quat::Identity(), err.quat()) * 180.0 / M_PI);
-    if (trans.back() > 0.1 || rot.back() > 2.0) ++acc.wrong;
+    ++res->loops_per_pair[(a ? a->name : "?") + "-" + (b ? b->name : "?")];
+    const std::optional<LoopCheck> c = checkLoop(run, loop);
+    if (!c) continue;
+    trans.push_back(c->err_m);
+    rot.push_back(c->err_deg);
+    if (c->err_m > 0.1 || c->err_deg > 2.0) ++acc.wrong;
     ++acc.loops;
     if (loop.a.agent != loop.b.agent) ++acc.inter_agent;
   }
@@ -208,7 +226,9 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
     return s;
   if (Status s = writeFile(out / "loops.csv",
                            [&](std::ostream& o) {
-                             o << "agent_a,keyframe_a,agent_b,keyframe_b,accepted,tx,ty,tz\n";
+                             o.precision(15);
+                             o << "agent_a,keyframe_a,agent_b,keyframe_b,accepted,tx,ty,tz,"
+                                  "stamp_a,stamp_b,gt_distance_m,error_m,error_deg\n";
                              for (const server::LoopEdge& l : run.server().map().loops) {
                                const OfflineAgent* a = agentOfRobot(run, l.a.agent);
                                const OfflineAgent* b = agentOfRobot(run, l.b.agent);
@@ -216,7 +236,13 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                                  << (b ? b->name : "?") << ',' << l.b.id << ','
                                  << (l.accepted ? 1 : 0) << ',' << l.T_a_b.translation().x()
                                  << ',' << l.T_a_b.translation().y() << ','
-                                 << l.T_a_b.translation().z() << '\n';
+                                 << l.T_a_b.translation().z();
+                               if (const auto c = checkLoop(run, l))  // empty without ground truth
+                                 o << ',' << c->stamp_a << ',' << c->stamp_b << ','
+                                   << c->gt_distance_m << ',' << c->err_m << ',' << c->err_deg;
+                               else
+                                 o << ",,,,,";
+                               o << '\n';
                              }
                            });
       !s)
