@@ -85,7 +85,13 @@ std::string GeneralizedCorrespondences::validate() const {
       if (!T.translation().allFinite() || !T.quat().coeffs().allFinite()) return "non-finite camera offset";
     }
   }
+  if ((!depths_q.empty() && depths_q.size() != n) || (!depths_c.empty() && depths_c.size() != n)) {
+    return "depth arrays must be empty or as long as the correspondences";
+  }
   for (std::size_t i = 0; i < n; ++i) {
+    if (!(std::isfinite(depthQ(i)) && depthQ(i) >= 0 && std::isfinite(depthC(i)) && depthC(i) >= 0)) {
+      return "correspondence " + std::to_string(i) + " has a negative or non-finite depth";
+    }
     if (cam_q[i] < 0 || cam_q[i] >= static_cast<int>(T_refQ_Cq.size()) || cam_c[i] < 0 ||
         cam_c[i] >= static_cast<int>(T_refC_Cc.size())) {
       return "correspondence " + std::to_string(i) + " has a camera index out of range";

@@ -25,6 +25,7 @@ Status LoopClosureParams::read(const Config& config, const std::string& prefix) 
                    config.get(p + "sigma_floor_px", &sigma_floor_px),
                    config.get(p + "covariance_inflation", &covariance_inflation),
                    config.get(p + "max_translation_sigma_m", &max_translation_sigma_m),
+                   config.get(p + "depth_focal_baseline_px_m", &depth_focal_baseline_px_m),
                    config.get(p + "deterministic", &deterministic)}) {
     if (!s) return s;
   }
@@ -50,6 +51,7 @@ void LoopClosureParams::write(ConfigWriter* w, const std::string& prefix) const 
   w->set(p + "sigma_floor_px", sigma_floor_px);
   w->set(p + "covariance_inflation", covariance_inflation);
   w->set(p + "max_translation_sigma_m", max_translation_sigma_m);
+  w->set(p + "depth_focal_baseline_px_m", depth_focal_baseline_px_m);
   w->set(p + "deterministic", deterministic);
 }
 
@@ -70,6 +72,7 @@ Status LoopClosureParams::validate() const {
   if (!(sigma_floor_px > 0)) return Error{"sigma_floor_px must be > 0"};
   if (!(covariance_inflation > 0)) return Error{"covariance_inflation must be > 0"};
   if (!(max_translation_sigma_m > 0)) return Error{"max_translation_sigma_m must be > 0"};
+  if (!(depth_focal_baseline_px_m >= 0)) return Error{"depth_focal_baseline_px_m must be >= 0"};
   return Status::Ok();
 }
 
@@ -106,6 +109,8 @@ GeneralizedCorrespondences makeCorrespondences(const Rig& query, const Rig& cand
     corr.bearings_c.push_back(candidate.intrinsics[m.cam_c].bearing(Vec2(kc.u, kc.v)));
     corr.cam_q.push_back(m.cam_q);
     corr.cam_c.push_back(m.cam_c);
+    corr.depths_q.push_back(kq.depth > 0 && std::isfinite(kq.depth) ? kq.depth : 0.0);
+    corr.depths_c.push_back(kc.depth > 0 && std::isfinite(kc.depth) ? kc.depth : 0.0);
   }
   return corr;
 }

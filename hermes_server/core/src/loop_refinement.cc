@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <ceres/ceres.h>
 #include <Eigen/Eigenvalues>
@@ -53,11 +54,71 @@ struct CandidateReprojection {
   double f;
 };
 
+/// Inverse-depth residual of a point (query reference frame) against the depth a
+/// query keypoint measured, in disparity pixels: fb * (1/z_pred - 1/z_obs).
+struct QueryDepth {
+  QueryDepth(const SE3& T_refQ_C, double depth, double fb)
+      : T_C_ref(T_refQ_C.inverse()), inv_z(1.0 / depth), fb(fb) {}
+  template <typename T>
+  bool operator()(const T* p, T* r) const {
+    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
+    const T z = (T_C_ref.rotation().cast<T>() * P + T_C_ref.translation().cast<T>()).z();
+    if (z <= T(1e-9)) return false;
+    r[0] = T(fb) * (T(1) / z - T(inv_z));
+    return true;
+  }
+  SE3 T_C_ref;
+  double inv_z;
+  double fb;
+};
+
+/// The same for a candidate keypoint's depth; depends on the pose like
+/// CandidateReprojection.
+struct CandidateDepth {
+  CandidateDepth(const SE3& T_refC_C, double depth, double fb)
+      : T_C_ref(T_refC_C.inverse()), inv_z(1.0 / depth), fb(fb) {}
+  template <typename T>
+  bool operator()(const T* q, const T* t, const T* p, T* r) const {
+    const Eigen::Quaternion<T> Q(q[3], q[0], q[1], q[2]);
+    const Eigen::Matrix<T, 3, 1> tt(t[0], t[1], t[2]);
+    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
+    const Eigen::Matrix<T, 3, 1> p_refC = Q.conjugate() * (P - tt);
+    const T z = (T_C_ref.rotation().cast<T>() * p_refC + T_C_ref.translation().cast<T>()).z();
+    if (z <= T(1e-9)) return false;
+    r[0] = T(fb) * (T(1) / z - T(inv_z));
+    return true;
+  }
+  SE3 T_C_ref;
+  double inv_z;
+  double fb;
+};
+
+/// The residual terms of one correspondence; depth terms only where measured.
+struct Terms {
+  QueryReprojection rq;
+  CandidateReprojection rc;
+  std::optional<QueryDepth> dq;
+  std::optional<CandidateDepth> dc;
+};
+
 /// Midpoint triangulation in the query reference frame; false when parallel or
 /// behind a camera.
 bool triangulate(const GeneralizedCorrespondences& corr, int i, const SE3& T, Vec3* p) {
   const SE3& Tq = corr.T_refQ_Cq[corr.cam_q[i]];
   const SE3 Tc = T * corr.T_refC_Cc[corr.cam_c[i]];
+  // A measured depth fixes the point better than a short-baseline intersection.
+  if (corr.depthQ(i) > 0) {
+    const Vec3& b = corr.bearings_q[i];
+    if (b.z() <= 1e-9) return false;
+    *p = Tq * (b * (corr.depthQ(i) / b.z()));
+    return true;
+  }
+  if (corr.depthC(i) > 0) {
+    const Vec3& b = corr.bearings_c[i];
+    if (b.z() <= 1e-9) return false;
+    *p = Tc * (b * (corr.depthC(i) / b.z()));
+    return true;
+  }
   const Vec3 c1 = Tq.translation(), d1 = Tq.quat() * corr.bearings_q[i];
   const Vec3 c2 = Tc.translation(), d2 = Tc.quat() * corr.bearings_c[i];
   const Vec3 w = c1 - c2;
@@ -70,13 +131,16 @@ bool triangulate(const GeneralizedCorrespondences& corr, int i, const SE3& T, Ve
   return true;
 }
 
-/// Both pixel residuals of one correspondence (4 values).
-Eigen::Vector4d residuals(const QueryReprojection& rq, const CandidateReprojection& rc,
-                          const SE3& T, const Vec3& p) {
-  Eigen::Vector4d r = Eigen::Vector4d::Constant(1e6);
+/// Pixel and disparity residuals of one correspondence (6 values; depth rows
+/// are 0 where no depth was measured).
+Vec6 residuals(const Terms& c, const SE3& T, const Vec3& p) {
+  Vec6 r = Vec6::Zero();
+  r.head<4>().setConstant(1e6);
   const Eigen::Vector4d qc = T.quat().coeffs();  // x y z w
-  rq(p.data(), r.data());
-  rc(qc.data(), T.translation().data(), p.data(), r.data() + 2);
+  c.rq(p.data(), r.data());
+  c.rc(qc.data(), T.translation().data(), p.data(), r.data() + 2);
+  if (c.dq && !(*c.dq)(p.data(), r.data() + 4)) r(4) = 1e6;
+  if (c.dc && !(*c.dc)(qc.data(), T.translation().data(), p.data(), r.data() + 5)) r(5) = 1e6;
   return r;
 }
 
@@ -98,11 +162,16 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
   }
   Eigen::Vector4d q = T0.quat().coeffs();
   Vec3 t = T0.translation();
-  std::vector<QueryReprojection> rqs;
-  std::vector<CandidateReprojection> rcs;
+  const double fb = params.depth_focal_baseline_px_m;
+  std::vector<Terms> terms;
   for (int i : ids) {
-    rqs.emplace_back(corr.T_refQ_Cq[corr.cam_q[i]], corr.bearings_q[i], f);
-    rcs.emplace_back(corr.T_refC_Cc[corr.cam_c[i]], corr.bearings_c[i], f);
+    const SE3& Tq = corr.T_refQ_Cq[corr.cam_q[i]];
+    const SE3& Tc = corr.T_refC_Cc[corr.cam_c[i]];
+    Terms c{QueryReprojection(Tq, corr.bearings_q[i], f),
+            CandidateReprojection(Tc, corr.bearings_c[i], f), std::nullopt, std::nullopt};
+    if (fb > 0 && corr.depthQ(i) > 0) c.dq.emplace(Tq, corr.depthQ(i), fb);
+    if (fb > 0 && corr.depthC(i) > 0) c.dc.emplace(Tc, corr.depthC(i), fb);
+    terms.push_back(c);
   }
 
   if (params.refine && ids.size() >= 18) {
@@ -111,14 +180,25 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
     ceres::Problem problem(popt);
     problem.AddParameterBlock(q.data(), 4, new ceres::EigenQuaternionManifold());
     problem.AddParameterBlock(t.data(), 3);
+    const double huber = params.ransac_threshold_px;
     for (std::size_t k = 0; k < ids.size(); ++k) {
+      const Terms& c = terms[k];
       problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<QueryReprojection, 2, 3>(new QueryReprojection(rqs[k])),
-          new ceres::HuberLoss(params.ransac_threshold_px), points[k].data());
+          new ceres::AutoDiffCostFunction<QueryReprojection, 2, 3>(new QueryReprojection(c.rq)),
+          new ceres::HuberLoss(huber), points[k].data());
       problem.AddResidualBlock(new ceres::AutoDiffCostFunction<CandidateReprojection, 2, 4, 3, 3>(
-                                   new CandidateReprojection(rcs[k])),
-                               new ceres::HuberLoss(params.ransac_threshold_px), q.data(),
-                               t.data(), points[k].data());
+                                   new CandidateReprojection(c.rc)),
+                               new ceres::HuberLoss(huber), q.data(), t.data(), points[k].data());
+      if (c.dq) {
+        problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<QueryDepth, 1, 3>(new QueryDepth(*c.dq)),
+            new ceres::HuberLoss(huber), points[k].data());
+      }
+      if (c.dc) {
+        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<CandidateDepth, 1, 4, 3, 3>(
+                                     new CandidateDepth(*c.dc)),
+                                 new ceres::HuberLoss(huber), q.data(), t.data(), points[k].data());
+      }
     }
     ceres::Solver::Options opt;
     opt.linear_solver_type = ceres::DENSE_SCHUR;
@@ -140,28 +220,33 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
   // Inliers by reprojection error in both views; information by Schur complement.
   Mat6 info = Mat6::Zero();
   double sq_sum = 0;
+  int num_residuals = 0;
   const double h = 1e-6;
   for (std::size_t k = 0; k < ids.size(); ++k) {
-    const Eigen::Vector4d r = residuals(rqs[k], rcs[k], T, points[k]);
-    if (!(r.head<2>().norm() < params.ransac_threshold_px && r.tail<2>().norm() < params.ransac_threshold_px)) {
+    const Vec6 r = residuals(terms[k], T, points[k]);
+    // A measured depth that disagrees makes the match an outlier (metric check).
+    const double th = params.ransac_threshold_px;
+    if (!(r.head<2>().norm() < th && r.segment<2>(2).norm() < th && std::abs(r(4)) < th &&
+          std::abs(r(5)) < th)) {
       continue;
     }
-    Eigen::Matrix<double, 4, 9> J;
+    Eigen::Matrix<double, 6, 9> J;
     for (int j = 0; j < 9; ++j) {
       Vec6 xi = Vec6::Zero();
       Vec3 dp = Vec3::Zero();
       if (j < 6) xi(j) = h; else dp(j - 6) = h;
-      J.col(j) = (residuals(rqs[k], rcs[k], T * SE3::exp(xi), points[k] + dp) -
-                  residuals(rqs[k], rcs[k], T * SE3::exp(-xi), points[k] - dp)) / (2 * h);
+      J.col(j) = (residuals(terms[k], T * SE3::exp(xi), points[k] + dp) -
+                  residuals(terms[k], T * SE3::exp(-xi), points[k] - dp)) / (2 * h);
     }
-    const Eigen::Matrix<double, 4, 6> Jx = J.leftCols<6>();
-    const Eigen::Matrix<double, 4, 3> Jp = J.rightCols<3>();
+    const Eigen::Matrix<double, 6, 6> Jx = J.leftCols<6>();
+    const Eigen::Matrix<double, 6, 3> Jp = J.rightCols<3>();
     const Mat3 Hpp = Jp.transpose() * Jp;
     Eigen::SelfAdjointEigenSolver<Mat3> ep(Hpp);
     if (!(ep.eigenvalues()(0) > 1e-9 * ep.eigenvalues()(2))) continue;
     const Eigen::Matrix<double, 3, 6> Hpx = Jp.transpose() * Jx;
     info += Jx.transpose() * Jx - Hpx.transpose() * Hpp.inverse() * Hpx;
     sq_sum += r.squaredNorm();
+    num_residuals += 4 + (terms[k].dq ? 1 : 0) + (terms[k].dc ? 1 : 0);
     out.inliers.push_back(ids[k]);
   }
   const int n = static_cast<int>(out.inliers.size());
@@ -169,8 +254,10 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
     out.reason = "only " + std::to_string(n) + " well-triangulated inliers";
     return out;
   }
-  // 4 residuals and 3 point parameters per inlier, 6 pose parameters.
-  const double sigma = std::max(std::sqrt(sq_sum / (n - 6)), params.sigma_floor_px);
+  // Degrees of freedom: the residuals less 3 point parameters per inlier and 6
+  // pose parameters (4n - 3n - 6 = n - 6 without depths).
+  const int dof = std::max(1, num_residuals - 3 * n - 6);
+  const double sigma = std::max(std::sqrt(sq_sum / dof), params.sigma_floor_px);
   out.sigma_px = sigma;
   info /= sigma * sigma * params.covariance_inflation;
   info = 0.5 * (info + info.transpose()).eval();

@@ -77,8 +77,16 @@ bool projectNoisy(const PinholeIntrinsics& k, const SE3& T_W_C, const Vec3& p_W,
 }
 
 /// Direct bearing correspondences: inliers from the scene plus random outliers.
+/// depth_noise_px >= 0 also fills depths (disparity noise for f*b = kFb), < 0 none.
+constexpr double kFb = 45.0;
+double noisyDepth(double z, double disparity_noise_px, std::mt19937& rng) {
+  std::normal_distribution<double> n(0, disparity_noise_px);
+  return kFb / std::max(kFb / z + n(rng), 1e-3);
+}
+
 GeneralizedCorrespondences makeBearings(const Scene& s, std::mt19937& rng, int num_inliers,
-                                        double outlier_fraction, double noise_px) {
+                                        double outlier_fraction, double noise_px,
+                                        double depth_noise_px = -1) {
   const PinholeIntrinsics k = testCamera();
   GeneralizedCorrespondences corr;
   corr.focal_px = k.fx;
@@ -98,6 +106,10 @@ GeneralizedCorrespondences makeBearings(const Scene& s, std::mt19937& rng, int n
     corr.bearings_c.push_back(k.bearing(uc));
     corr.cam_q.push_back(cq);
     corr.cam_c.push_back(cc);
+    if (depth_noise_px >= 0) {
+      corr.depths_q.push_back(noisyDepth((s.T_W_Q[cq].inverse() * p).z(), depth_noise_px, rng));
+      corr.depths_c.push_back(noisyDepth((s.T_W_C[cc].inverse() * p).z(), depth_noise_px, rng));
+    }
     ++added;
   }
   const int num_out = static_cast<int>(std::round(num_inliers * outlier_fraction / (1 - outlier_fraction)));
@@ -107,6 +119,11 @@ GeneralizedCorrespondences makeBearings(const Scene& s, std::mt19937& rng, int n
     corr.bearings_c.push_back(k.bearing(Vec2(uu(rng), uv(rng))));
     corr.cam_q.push_back(pick_q(rng));
     corr.cam_c.push_back(pick_c(rng));
+    if (depth_noise_px >= 0) {
+      std::uniform_real_distribution<double> uz(2, 12);
+      corr.depths_q.push_back(uz(rng));
+      corr.depths_c.push_back(uz(rng));
+    }
   }
   // Shuffle so that outliers are not grouped at the end.
   std::vector<int> perm(corr.size());
@@ -118,6 +135,10 @@ GeneralizedCorrespondences makeBearings(const Scene& s, std::mt19937& rng, int n
     out.bearings_c[i] = corr.bearings_c[perm[i]];
     out.cam_q[i] = corr.cam_q[perm[i]];
     out.cam_c[i] = corr.cam_c[perm[i]];
+    if (depth_noise_px >= 0) {
+      out.depths_q[i] = corr.depths_q[perm[i]];
+      out.depths_c[i] = corr.depths_c[perm[i]];
+    }
   }
   return out;
 }
@@ -164,6 +185,72 @@ TEST(LoopClosure, StraightLineRigs) {
     // Either a correct pose or an explicit failure, never a wrong accepted loop.
     if (r.ok()) expectPose(r.T_refQ_refC, s.T_refQ_refC, 0.05, 0.3);
   }
+}
+
+/// Points 2-5 m in front, as in a hall, where stereo depth is informative.
+void nearPoints(std::mt19937& rng, Scene* s) {
+  std::uniform_real_distribution<double> ux(-4, 4), uy(-3, 3), uz(2, 5);
+  for (Vec3& p : s->points_W) p = Vec3(ux(rng), uy(rng), uz(rng));
+}
+
+/// Rig cameras 0-6 cm apart (keyframes close together), 1 px noise: the
+/// bearings alone leave the metric translation weak; keypoint depths fix it.
+Scene shortBaselineScene(std::mt19937& rng) {
+  Scene s = makeScene(rng, 600, 1);
+  nearPoints(rng, &s);
+  for (int k = 1; k < 4; ++k) {
+    s.T_W_Q.push_back(s.T_W_Q[0] * randomSmallPose(rng, 0.06, 2 * kDeg));
+    s.T_W_C.push_back(s.T_W_C[0] * randomSmallPose(rng, 0.06, 2 * kDeg));
+  }
+  return s;
+}
+
+TEST(LoopClosure, KeypointDepthsFixTheMetricTranslation) {
+  double sum_without = 0, sum_with = 0;
+  for (int seed = 41; seed <= 44; ++seed) {
+    std::mt19937 rng(seed);
+    const Scene s = shortBaselineScene(rng);
+    const GeneralizedCorrespondences corr = makeBearings(s, rng, 200, 0.3, 1.0, 0.3);
+    GeneralizedCorrespondences bare = corr;
+    bare.depths_q.clear();
+    bare.depths_c.clear();
+    LoopClosureParams params;
+    params.max_translation_sigma_m = 10;  // compare both, do not reject the weak one
+    const LoopClosureResult with = solveGeneralizedRelativePose(corr, params);
+    const LoopClosureResult without = solveGeneralizedRelativePose(bare, params);
+    ASSERT_TRUE(with.ok()) << "seed " << seed << ": " << with.reason;
+    const double e_with = translationalDistance(with.T_refQ_refC, s.T_refQ_refC);
+    const double e_without =
+        without.ok() ? translationalDistance(without.T_refQ_refC, s.T_refQ_refC) : 1.0;
+    std::printf("short baseline seed %d: dt with depths %.4f m, without %.4f m (%s)\n", seed,
+                e_with, e_without, toString(without.status));
+    EXPECT_LT(e_with, 0.03) << "seed " << seed;
+    EXPECT_LT(angularDistance(with.T_refQ_refC, s.T_refQ_refC) / kDeg, 0.3) << "seed " << seed;
+    // The depths also tighten the translation covariance.
+    if (without.ok()) {
+      const double var_with = with.covariance.topLeftCorner<3, 3>().trace();
+      const double var_without = without.covariance.topLeftCorner<3, 3>().trace();
+      EXPECT_LT(var_with, var_without);
+    }
+    sum_with += e_with;
+    sum_without += e_without;
+  }
+  EXPECT_LT(sum_with, 0.3 * sum_without);
+}
+
+TEST(LoopClosure, DepthsThatDisagreeRejectTheMatches) {
+  // Right bearings but every candidate depth twice too far: metrically
+  // inconsistent (a wrong place that happens to look alike), so no loop.
+  std::mt19937 rng(51);
+  Scene s = makeScene(rng, 600, 4);
+  nearPoints(rng, &s);
+  GeneralizedCorrespondences corr = makeBearings(s, rng, 200, 0.2, 0.5, 0.2);
+  for (double& z : corr.depths_c) z *= 2.0;
+  const LoopClosureResult r = solveGeneralizedRelativePose(corr, LoopClosureParams());
+  EXPECT_FALSE(r.ok()) << "accepted with " << r.num_inliers << " inliers";
+  // Depths of the wrong length are bad input.
+  corr.depths_q.pop_back();
+  EXPECT_EQ(solveGeneralizedRelativePose(corr, LoopClosureParams()).status, LoopStatus::kBadInput);
 }
 
 TEST(LoopClosure, PlainSeventeenPointWithoutPrefilter) {
