@@ -2,6 +2,8 @@
 # Builds a shared library from <dir>/src/*.cc (public headers in <dir>/include),
 # one executable per <dir>/tools/*.cc (named hermes_<stem>), and one GoogleTest
 # executable per <dir>/test/test_*.cc (linked with <dir>/test/support/*.cc if any).
+# Tests get HERMES_SOURCE_DIR and HERMES_BIN_DIR (the tools' folder); a test whose
+# source mentions HERMES_BIN_DIR depends on the module's tools.
 # Sources are globbed, so adding a file needs no CMake edit (re-run cmake).
 function(hermes_module)
   cmake_parse_arguments(M "" "NAME;DIR" "DEPS" ${ARGN})
@@ -18,9 +20,11 @@ function(hermes_module)
     LIBRARY_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/lib)
 
   file(GLOB tools CONFIGURE_DEPENDS ${M_DIR}/tools/*.cc)
+  set(tool_targets "")
   foreach(tool ${tools})
     get_filename_component(stem ${tool} NAME_WE)
     add_executable(hermes_${stem} ${tool})
+    list(APPEND tool_targets hermes_${stem})
     target_link_libraries(hermes_${stem} PRIVATE ${M_NAME})
     # Benchmarks find shipped files and the shared data beside the checkout.
     target_compile_definitions(hermes_${stem} PRIVATE
@@ -51,7 +55,13 @@ function(hermes_module)
       endif()
       target_compile_definitions(${exe} PRIVATE
         HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
-        HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data")
+        HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data"
+        HERMES_BIN_DIR="${CMAKE_BINARY_DIR}/bin")
+      # A test that runs the module's tools (it names HERMES_BIN_DIR) needs them built.
+      file(READ ${t} body)
+      if(tool_targets AND body MATCHES "HERMES_BIN_DIR")
+        add_dependencies(${exe} ${tool_targets})
+      endif()
       set_target_properties(${exe} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/test_bin)
       gtest_discover_tests(${exe} TEST_PREFIX "${M_NAME}." DISCOVERY_TIMEOUT 60
         PROPERTIES LABELS "unit")

@@ -13,6 +13,7 @@ Status BandwidthMonitorParams::read(const Config& c) {
                             std::pair{"uplink.monitor.initial_bps", &initial_bps}}) {
     if (Status s = c.get(key, field); !s) return s;
   }
+  if (Status s = c.get("uplink.monitor.span_messages", &span_messages); !s) return s;
   return validate();
 }
 
@@ -22,6 +23,7 @@ Status BandwidthMonitorParams::validate() const {
   if (!(outage_timeout_s > 0)) return Error{"uplink.monitor.outage_timeout_s must be > 0"};
   if (!(probe_factor >= 1.0)) return Error{"uplink.monitor.probe_factor must be >= 1"};
   if (!(initial_bps > 0)) return Error{"uplink.monitor.initial_bps must be > 0"};
+  if (span_messages < 1) return Error{"uplink.monitor.span_messages must be >= 1"};
   return Status::Ok();
 }
 
@@ -31,6 +33,7 @@ void BandwidthMonitorParams::write(ConfigWriter& w) const {
   w.set("uplink.monitor.outage_timeout_s", outage_timeout_s);
   w.set("uplink.monitor.probe_factor", probe_factor);
   w.set("uplink.monitor.initial_bps", initial_bps);
+  w.set("uplink.monitor.span_messages", span_messages);
 }
 
 BandwidthMonitor::BandwidthMonitor(BandwidthMonitorParams p) : p_(p) {
@@ -49,9 +52,18 @@ void BandwidthMonitor::onAck(std::uint64_t id, double t) {
   // While the link is busy, this message's transfer began when the previous
   // one was acknowledged, not when it was queued.
   const double start = std::max(it->second.sent, last_ack_);
-  const double dt = t - start;
-  if (dt > 1e-6) {
-    const double bps = static_cast<double>(it->second.bytes) / dt;
+  // A message sent after the last ack found the link idle: a new busy period.
+  if (!busy_run_.empty() && start > busy_run_.back().ack) busy_run_.clear();
+  busy_run_.push_back({start, t, static_cast<double>(it->second.bytes)});
+  while (static_cast<int>(busy_run_.size()) > p_.span_messages) busy_run_.pop_front();
+  double bps = -1;  // lowest rate over the spans ending with this message
+  double bytes = 0;
+  for (auto d = busy_run_.rbegin(); d != busy_run_.rend(); ++d) {
+    bytes += d->bytes;
+    const double dt = t - d->start;
+    if (dt > 1e-6) bps = bps < 0 ? bytes / dt : std::min(bps, bytes / dt);
+  }
+  if (bps > 0) {
     samples_.push_back({t, bps});
     last_sample_bps_ = bps;
     last_sample_t_ = t;

@@ -1,6 +1,11 @@
 // Estimates the available uplink rate from what is really delivered (DESIGN §3):
 // per-message delivery rate = bytes / (ack time - start of its transfer), where
-// the transfer starts at max(send time, previous ack) while the link is busy;
+// the transfer starts at max(send time, previous ack) while the link is busy.
+// The sample is the lowest rate over the spans of the last 1..span_messages
+// messages of the current busy period: after a stall (TCP head-of-line blocking
+// behind a lost segment) a message's bytes arrive while its predecessor is still
+// incomplete, so that message alone would look faster than the link; the span
+// that starts before the stall does not;
 // B̂ = max over the last `window_s` of samples, decayed when none arrive;
 // outage when nothing is acknowledged for `outage_timeout_s` beyond the time the
 // outstanding bytes should take → B̂ = 0. After a window whose budget was fully
@@ -22,6 +27,7 @@ struct BandwidthMonitorParams {
   double outage_timeout_s = 3.0;  ///< [s] silence beyond the expected transfer time
   double probe_factor = 1.25;     ///< budget multiplier after a fully delivered window
   double initial_bps = 125000.0;  ///< [byte/s] guess before any sample (1 Mbit/s)
+  int span_messages = 3;          ///< longest run of back-to-back messages a sample spans
 
   Status read(const Config& c);
   Status validate() const;
@@ -57,9 +63,13 @@ class BandwidthMonitor {
     std::size_t bytes;
     double sent;
   };
+  struct Delivered {  ///< a message of the current busy period
+    double start, ack, bytes;
+  };
   BandwidthMonitorParams p_;
   std::map<std::uint64_t, Outstanding> outstanding_;
   std::deque<Sample> samples_;
+  std::deque<Delivered> busy_run_;  ///< last span_messages back-to-back deliveries
   double last_ack_ = -1e300;
   double last_sample_bps_ = 0;
   double last_sample_t_ = -1e300;
