@@ -1,71 +1,34 @@
 #include <gtest/gtest.h>
 
 #include "hermes/agent/bandwidth_monitor.h"
+#include "hermes/agent/monitor_replay.h"
 #include "hermes/core/emulated_link.h"
 
 using namespace hermes;
 using namespace hermes::agent;
 
-namespace {
-// Drives the monitor like an agent: every 5 s it sends a window whose size is
-// the planning rate × 5 s × 0.8, split into a few messages, over the link.
-struct Sim {
-  SharedLink link;
-  BandwidthMonitor monitor;
-  std::uint64_t next_id = 0;
-  std::vector<std::pair<double, double>> curve;  // (t, estimate bps)
-  explicit Sim(LinkTrace trace) : link(std::move(trace), 1, 3) {}
 
-  void run(double t_end) {
-    double next_window = 0;
-    for (double t = 0; t < t_end; t += 0.05) {
-      if (t >= next_window) {
-        const double budget = 0.8 * monitor.planningRate(t) * 5.0;
-        const double backlog = static_cast<double>(monitor.outstandingBytes());
-        const double bytes = std::max(20000.0, budget - backlog);
-        const bool delivered_all = backlog < 1.0;
-        monitor.onWindowDelivered(delivered_all);
-        for (int k = 0; k < 4; ++k) {
-          LinkMessage m;
-          m.id = next_id++;
-          m.bytes = static_cast<std::size_t>(bytes / 4);
-          monitor.onSend(m.id, m.bytes, t);
-          link.send(m, t);
-        }
-        next_window += 5.0;
-      }
-      for (const auto& d : link.advanceTo(t)) {
-        if (d.lost) continue;
-        const double ack = link.ackArrival(d.arrival_time);
-        if (ack >= 0) monitor.onAck(d.message.id, ack);
-      }
-      curve.emplace_back(t, monitor.estimate(t));
-    }
-  }
-  double estimateAt(double t) const {
-    for (const auto& [ct, e] : curve)
-      if (ct >= t) return e;
-    return curve.back().second;
-  }
-};
+namespace {
+double estimateAt(const std::vector<MonitorCurvePoint>& curve, double t) {
+  for (const MonitorCurvePoint& c : curve)
+    if (c.t >= t) return c.estimate_mbitps;
+  return curve.back().estimate_mbitps;
+}
 }  // namespace
 
 TEST(BandwidthMonitor, ConvergesOnConstantLink) {
-  Sim sim(LinkTrace::constant(10.0, 5.0));
-  sim.run(60.0);
-  const double truth = 10e6 / 8;
-  EXPECT_NEAR(sim.estimateAt(59.0), truth, 0.2 * truth);
+  const auto curve = replayMonitor(LinkTrace::constant(10.0, 5.0), {}, {}, 60.0);
+  EXPECT_NEAR(estimateAt(curve, 59.0), 10.0, 2.0);
 }
 
 TEST(BandwidthMonitor, DetectsOutageAndRecovers) {
   auto trace = LinkTrace::fromString(
       "time_s,rate_mbitps,latency_ms,loss\n0,10,5,0\n40,0,5,0\n70,10,5,0\n", "t");
   ASSERT_TRUE(trace.ok());
-  Sim sim(*trace);
-  sim.run(120.0);
-  EXPECT_GT(sim.estimateAt(39.0), 0.8 * 1.25e6);
-  EXPECT_EQ(sim.estimateAt(50.0), 0.0);  // outage detected well within 10 s
-  EXPECT_NEAR(sim.estimateAt(115.0), 1.25e6, 0.2 * 1.25e6);
+  const auto curve = replayMonitor(*trace, {}, {}, 120.0);
+  EXPECT_GT(estimateAt(curve, 39.0), 8.0);
+  EXPECT_EQ(estimateAt(curve, 50.0), 0.0);  // outage detected well within 10 s
+  EXPECT_NEAR(estimateAt(curve, 115.0), 10.0, 2.0);
 }
 
 TEST(BandwidthMonitor, ParamsValidate) {
@@ -82,25 +45,48 @@ TEST(BandwidthMonitor, ParamsValidate) {
 // within 20 % of the true rate within two 5-s windows after each change, and the
 // outage detected within the timeout.
 TEST(BandwidthMonitor, FollowsStepTrace) {
+  // The trace: 30 -> 10 -> 2 -> 0 (30 s outage) -> 20 Mbit/s.
   auto trace = LinkTrace::fromString(
       "time_s,rate_mbitps,latency_ms,loss\n0,30,5,0\n60,10,5,0\n120,2,5,0\n180,0,5,0\n"
       "210,20,5,0\n",
       "steps");
   ASSERT_TRUE(trace.ok());
-  Sim sim(*trace);
-  sim.run(270.0);
-  const std::string csv = ::testing::TempDir() + "/monitor_steps.csv";
-  if (std::FILE* f = std::fopen(csv.c_str(), "w")) {
-    std::fprintf(f, "time_s,true_mbitps,estimate_mbitps\n");
-    for (const auto& [t, e] : sim.curve)
-      std::fprintf(f, "%.2f,%.3f,%.3f\n", t, trace->at(t).rate_mbitps, e * 8e-6);
-    std::fclose(f);
+  const BandwidthMonitorParams mp;
+  const MonitorReplayParams rp;
+  const auto curve = replayMonitor(*trace, mp, rp, 270.0);
+  ASSERT_TRUE(writeMonitorCurveCsv(curve, ::testing::TempDir() + "/monitor_steps.csv").ok());
+  const auto steps = stepResponses(curve, rp.window_s);
+  ASSERT_EQ(steps.size(), 5u);
+  for (const MonitorStepResponse& r : steps) {
+    std::printf("change at %5.0f s to %4.0f Mbit/s: settled after %5.2f s, error two windows later %.3f\n",
+                r.t_change, r.rate_mbitps, r.settle_s, r.error_after_two_windows);
+    if (r.rate_mbitps > 0) {
+      EXPECT_LE(r.error_after_two_windows, 0.2) << "change at " << r.t_change;
+      EXPECT_GE(r.settle_s, 0) << "never settled after the change at " << r.t_change;
+      EXPECT_LE(r.settle_s, 2 * rp.window_s) << "change at " << r.t_change;
+    }
   }
-  struct Check { double t_change, rate; };
-  for (const Check c : {Check{0, 30}, Check{60, 10}, Check{120, 2}, Check{210, 20}}) {
-    const double t = c.t_change + 10.0 + 0.5;  // two windows later
-    const double est = sim.estimateAt(t) * 8e-6;
-    EXPECT_NEAR(est, c.rate, 0.2 * c.rate) << "at t=" << t << " (change at " << c.t_change << ")";
-  }
-  EXPECT_EQ(sim.estimateAt(180.0 + 3.0 + 5.0), 0.0);  // outage seen within T_out + one window
+  // Outage (t = 180): detected within T_out after the last message due before it.
+  double detected = -1;
+  for (const MonitorCurvePoint& c : curve)
+    if (c.t >= 180 && c.outage) { detected = c.t; break; }
+  ASSERT_GE(detected, 0) << "outage never detected";
+  std::printf("outage at 180 s detected at %.2f s (T_out %.1f s)\n", detected, mp.outage_timeout_s);
+  EXPECT_LE(detected - 180.0, mp.outage_timeout_s + rp.window_s);
+  for (const MonitorCurvePoint& c : curve)
+    if (c.t >= detected && c.t < 210) {
+      EXPECT_EQ(c.estimate_mbitps, 0.0) << "t=" << c.t;
+    }
+}
+
+TEST(BandwidthMonitor, ReplayParamsAndStepsOnAFlatTrace) {
+  EXPECT_FALSE(MonitorReplayParams{.window_s = 0}.validate().ok());
+  auto trace = LinkTrace::fromString("time_s,rate_mbitps,latency_ms,loss\n0,8,5,0\n", "flat");
+  ASSERT_TRUE(trace.ok());
+  const auto curve = replayMonitor(*trace, BandwidthMonitorParams{}, MonitorReplayParams{}, 60);
+  const auto steps = stepResponses(curve, 5.0);
+  ASSERT_EQ(steps.size(), 1u);
+  EXPECT_NEAR(steps[0].rate_mbitps, 8.0, 1e-9);
+  EXPECT_GE(steps[0].settle_s, 0);
+  EXPECT_FALSE(writeMonitorCurveCsv(curve, "/nonexistent_dir/x.csv").ok());
 }

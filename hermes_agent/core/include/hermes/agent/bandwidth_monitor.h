@@ -22,7 +22,7 @@
 namespace hermes::agent {
 
 struct BandwidthMonitorParams {
-  double window_s = 10.0;         ///< [s] max-filter window
+  double window_s = 8.0;          ///< [s] max-filter window (< two 5-s windows: drops seen in time)
   double decay_tau_s = 10.0;      ///< [s] decay time constant once samples stop
   double outage_timeout_s = 3.0;  ///< [s] silence beyond the expected transfer time
   double probe_factor = 1.25;     ///< budget multiplier after a fully delivered window
