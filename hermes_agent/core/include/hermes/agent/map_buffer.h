@@ -67,6 +67,12 @@ class MapBuffer {
   void resetSendTimes();
 
   std::size_t pendingCount() const { return pending_.size(); }
+  /// (session, seq) of every pending submap, in sending order.
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> pendingKeys() const {
+    std::vector<std::pair<std::uint32_t, std::uint64_t>> keys;
+    for (const auto& [key, s] : pending_) keys.push_back(key);
+    return keys;
+  }
   std::size_t pendingBytes() const { return pending_bytes_; }
   std::size_t fileBytes() const { return file_bytes_; }
   /// Bytes cut off a torn tail record when the spool was opened (0 normally).
