@@ -29,6 +29,8 @@
 #include <std_msgs/String.h>
 #include <tf2_ros/transform_broadcaster.h>
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <memory>
 #include <mutex>
@@ -72,9 +74,17 @@ class AgentNodelet : public nodelet::Nodelet {
     pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
     bool clear_spool = false;  // tests and demos: start without the previous run's backlog
     pnh.param("clear_spool", clear_spool, clear_spool);
-    if (clear_spool) {
-      std::error_code ec;
-      std::filesystem::remove_all(params_.uplink.buffer.dir, ec);
+    if (clear_spool) {  // drop the backlog, keep the session counter (see discardPending)
+      auto spool = hermes::agent::MapBuffer::open(params_.uplink.buffer);
+      auto dropped = spool.ok() ? spool->discardPending()
+                                : hermes::Expected<std::size_t>(hermes::Error{spool.error()});
+      if (!dropped.ok()) {
+        NODELET_FATAL("Agent %s: clear_spool: %s", robot_.c_str(), dropped.error().c_str());
+        return;
+      }
+      if (*dropped > 0)
+        NODELET_WARN("Agent %s: clear_spool: dropped %zu unacknowledged submaps of a previous run",
+                     robot_.c_str(), *dropped);
     }
     if (!dataset.empty()) {  // camera from the dataset folder (rectified K, T_B_C)
       auto ds = hermes::Dataset::open(dataset, run.dataset);
@@ -249,6 +259,7 @@ class AgentNodelet : public nodelet::Nodelet {
     nlohmann::json j;
     j["robot"] = robot_;
     j["uuid"] = uuid_;
+    j["pid"] = static_cast<std::int64_t>(::getpid());  // tells restarted processes apart
     j["session"] = pipeline_->session();
     j["created"] = keys(created_);
     j["replayed"] = keys(replayed_);
