@@ -16,7 +16,9 @@
 # Prints one JSON line (sent / applied / duplicates / lost / spool max vs cap / crashes / pass).
 #   scripts/ros_netns_delivery.sh [--json FILE] [--loss-pct 20] [--outage-s 30] [--outage-at 10]
 #       [--kill-after 3] [--restart-delay 2] [--rate 0.2] [--window-s 1] [--spool-cap-mb MB]
-#       [--drain-timeout 60] [--build DIR] [--keep-logs]
+#       [--drain-timeout 60] [--build DIR] [--keep-logs] [--clear-spool-on-restart]
+# --clear-spool-on-restart (negative control): the restart drops the spool's backlog; the run
+# fails if a dropped submap had not reached the server yet (lost), passes if it had.
 # Needs root, ip netns and nft; otherwise prints "SKIP: <reason>" and exits 77.
 # Exit status: 0 pass, 1 delivery check failed, 2 usage, 3 setup/run failure.
 set -euo pipefail
@@ -35,9 +37,10 @@ SPOOL_CAP_MB=""   # empty: the project's uplink.buffer.max_mbytes
 DRAIN_TIMEOUT=60
 KEEP_LOGS=0
 ROBOT=agent0
+RESTART_CLEAR=false
 while [[ $# -gt 0 ]]; do
   case "$1" in
-    --help|-h) sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --help|-h) sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     --json) JSON="$2"; shift 2 ;;
     --loss-pct) LOSS="$2"; shift 2 ;;
     --outage-s) OUTAGE_S="$2"; shift 2 ;;
@@ -50,6 +53,7 @@ while [[ $# -gt 0 ]]; do
     --drain-timeout) DRAIN_TIMEOUT="$2"; shift 2 ;;
     --build) BUILD="$2"; shift 2 ;;
     --keep-logs) KEEP_LOGS=1; shift ;;
+    --clear-spool-on-restart) RESTART_CLEAR=true; shift ;;
     *) echo "ros_netns_delivery: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -220,6 +224,8 @@ at() {  # at <seconds after the first agent start>
   awk -v n="$now" -v t="$1" 'BEGIN{exit !(t > n)}' && sleep "$(awk -v n="$now" -v t="$1" 'BEGIN{print t-n}')"
   return 0
 }
+CREATED='sum(len(r["created"]) for r in s["runs"])'              # submaps created, all runs
+PENDING='len(s["runs"][-1]["pending"]) if s["runs"] else 0'         # unacked, current run
 agent_field() {  # agent_field <python expression on s (agent state)>
   "$PY" -c "import json,sys; s=json.load(open(sys.argv[1])); print($1)" "$LOGS/agent_state.json" 2>/dev/null || echo "?"
 }
@@ -228,35 +234,35 @@ T0=$(date +%s.%N)
 G_AGENT1=$(start_agent "$LOGS/agent_run1.log" true); PGIDS+=("$G_AGENT1")
 log "agent run 1 started (pgid $G_AGENT1, clear_spool:=true, rate $RATE, loss $LOSS % both directions)"
 for _ in $(seq 600); do
-  [[ "$(agent_field 'len(s["created"])')" =~ ^[1-9] ]] && break
+  [[ "$(agent_field "$CREATED")" =~ ^[1-9] ]] && break
   kill -0 "$G_AGENT1" 2>/dev/null || fail "agent run 1 exited: $(tail -5 "$LOGS/agent_run1.log")"
   sleep 0.1
 done
-[[ "$(agent_field 'len(s["created"])')" =~ ^[1-9] ]] || fail "agent run 1 created no submap within 60 s"
+[[ "$(agent_field "$CREATED")" =~ ^[1-9] ]] || fail "agent run 1 created no submap within 60 s"
 T0=$(date +%s.%N)
 log "agent run 1 created its first submap; the timeline starts"
 at "$OUTAGE_AT"
-N=$(agent_field 'len(s["created"])')
-for _ in $(seq 200); do [[ "$(agent_field 'len(s["created"])')" != "$N" ]] && break; sleep 0.05; done
+N=$(agent_field "$CREATED")
+for _ in $(seq 200); do [[ "$(agent_field "$CREATED")" != "$N" ]] && break; sleep 0.05; done
 link_cut; T_CUT=$(date +%s.%N)
-log "link cut (all packets dropped both ways) for $OUTAGE_S s; agent created $(agent_field 'len(s["created"])') submap(s), $(agent_field 'len(s["last"]["pending"])') unacknowledged"
+log "link cut (all packets dropped both ways) for $OUTAGE_S s; agent created $(agent_field "$CREATED") submap(s), $(agent_field "$PENDING") unacknowledged"
 sleep "$(awk -v a="$T_CUT" -v b="$(date +%s.%N)" -v d="$OUTAGE_S" 'BEGIN{print d-(b-a)}')"
 link_restore; T_BACK=$(date +%s.%N)
 log "link restored after $(awk -v a="$T_CUT" -v b="$T_BACK" 'BEGIN{printf "%.1f", b-a}') s"
 sleep "$KILL_AFTER"
 for _ in $(seq 200); do
-  [[ "$(agent_field 'len(s["last"]["pending"])')" =~ ^[1-9] ]] && break; sleep 0.05
+  [[ "$(agent_field "$PENDING")" =~ ^[1-9] ]] && break; sleep 0.05
 done
 CRASH_RUN1=$(died "$LOGS/agent_run1.log")
-PENDING_AT_KILL=$(agent_field 'len(s["last"]["pending"]) if s["last"] else 0')
+PENDING_AT_KILL=$(agent_field "$PENDING")
 KILLED=$(tree "$G_AGENT1" | tr '\n' ' ')
 kill -KILL $KILLED 2>/dev/null || true
 log "SIGKILL to the agent's roslaunch and its nodes (pids $KILLED; spool pending before the kill: $PENDING_AT_KILL)"
 for _ in $(seq 50); do [[ -z "$(alive $KILLED)" ]] && break; sleep 0.1; done
 [[ -z "$(alive $KILLED)" ]] || fail "agent processes $(alive $KILLED) survived SIGKILL"
 sleep "$RESTART_DELAY"
-G_AGENT2=$(start_agent "$LOGS/agent_run2.log" false); PGIDS+=("$G_AGENT2")
-log "agent run 2 started (pgid $G_AGENT2, same spool, clear_spool:=false)"
+G_AGENT2=$(start_agent "$LOGS/agent_run2.log" "$RESTART_CLEAR"); PGIDS+=("$G_AGENT2")
+log "agent run 2 started (pgid $G_AGENT2, same spool, clear_spool:=$RESTART_CLEAR)"
 
 # Wait for run 2 to finish its sequence, its spool to drain and the server to apply it all.
 "$PY" - "$LOGS/agent_state.json" "$LOGS/server_state.json" "$DRAIN_TIMEOUT" "$RATE" <<'PY' >&2 || true
@@ -270,12 +276,12 @@ while time.time() < deadline:
         a, s = json.load(open(agent_f)), json.load(open(server_f))
     except (OSError, ValueError):
         continue
-    last = a.get("last")
-    if not last or last["session"] == 0 or not last["done"]:
+    runs = a.get("runs", [])
+    if len(runs) < 2 or not runs[-1]["done"]:
         continue
     done_at = done_at or time.time()
     applied = sum(p.get("submaps_applied", 0) for p in (s.get("status") or {}).get("per_agent", []))
-    if not last["pending"] and applied >= len(a["created"]):
+    if not runs[-1]["pending"] and applied >= sum(len(r["created"]) for r in runs):
         time.sleep(2)  # one more status of each side
         sys.exit(0)
     if time.time() - done_at > drain:
@@ -312,25 +318,28 @@ s = json.load(open(sys.argv[2]))
 crashes = [l for l in open(sys.argv[3]).read().splitlines() if l.strip()]
 nft = json.loads(sys.argv[4])
 loss, outage_s, run_time, pending_at_kill, wall = sys.argv[5:10]
-uuid = (a.get("last") or {}).get("uuid", "")
-key = lambda k: "%s/%d/%d" % (uuid, k[0], k[1])
-sent = {key(k) for k in a["created"]} | {key(k) for k in a["replayed"]}
+runs = a["runs"]
+key = lambda r, k: "%s/%d/%d" % (r["uuid"], k[0], k[1])
 accepted, dup = s["accepted"], s["duplicate"]
 applied = sum(p.get("submaps_applied", 0) for p in (s.get("status") or {}).get("per_agent", []))
+# Every submap a process created is one sent submap. A spool backlog found at start was
+# created by an earlier process (counted there); one the monitor never saw created counts too.
+created = [key(r, k) for r in runs for k in r["created"]]
+replayed_unseen = {key(r, k) for r in runs for k in r["replayed"]} - set(created)
+sent_total = len(created) + len(replayed_unseen)
+sent = set(created) | replayed_unseen
+reused = len(created) - len(set(created))  # a key created twice: the second cannot be applied
 lost = sorted(sent - set(accepted))
 unexpected = sorted(set(accepted) - sent)
 twice = sorted(k for k, n in accepted.items() if n > 1)
-sessions = {}
-for k in sent:
-    sess = k.split("/")[1]
-    e = sessions.setdefault(sess, {"sent": 0, "accepted": 0, "duplicate_acks": 0})
-    e["sent"] += 1
-    e["accepted"] += k in accepted
-    e["duplicate_acks"] += dup.get(k, 0)
-for sess, info in a["sessions"].items():
-    e = sessions.setdefault(sess, {"sent": 0, "accepted": 0, "duplicate_acks": 0})
-    e.update({"windows": info["windows"], "sends": info["sends"], "resends": info["resends"],
-              "replayed_from_spool": info["replayed"]})
+per_run = []
+for r in runs:
+    keys = [key(r, k) for k in r["created"]]
+    per_run.append({"session": r["session"], "sent": len(keys),
+                    "accepted": sum(k in accepted for k in keys),
+                    "duplicate_acks": sum(dup.get(k, 0) for k in keys),
+                    "replayed_from_spool": len(r["replayed"]), "windows": r["windows"],
+                    "sends": r["sends"], "resends": r["resends"], "done": r["done"]})
 # Measured loss from the nft counters: the first rule counts, the second drops.
 counters = {}
 for item in nft.get("nftables", []):
@@ -342,25 +351,26 @@ for item in nft.get("nftables", []):
 def pct(chain):
     c = counters.get(chain, [])
     return round(100.0 * c[1] / c[0], 1) if len(c) == 2 and c[0] else None
-last = a.get("last") or {}
+last = runs[-1] if runs else {}
 cap = a.get("cap_bytes") or 0
 checks = {
-    "both_runs_sent": len([x for x in sessions.values() if x["sent"] > 0]) >= 2,
-    "applied_equals_sent": applied == len(sent) and len(sent) > 0,
-    "none_lost": not lost,
+    "both_runs_sent": len(runs) >= 2 and all(r["sent"] > 0 for r in per_run),
+    "applied_equals_sent": applied == sent_total and sent_total > 0,
+    "none_lost": not lost and reused == 0,
     "none_unexpected": not unexpected,
     "no_duplicate_applied": not twice,
     "none_rejected": s["rejected"] == 0,
-    "spool_drained": last.get("session", 0) > 0 and not last.get("pending", [1]),
+    "spool_drained": bool(len(runs) >= 2 and last.get("done") and not last.get("pending", [1])),
     "spool_under_cap": 0 < cap and a["max_pending_bytes"] <= cap,
     "no_crash": not crashes,
 }
 out = {
-    "sent": len(sent), "applied": applied, "accepted_distinct": len(accepted),
+    "sent": sent_total, "applied": applied, "accepted_distinct": len(accepted),
     "duplicates_dropped": sum(dup.values()), "stale_dropped": s["stale"],
-    "accepted_twice": len(twice), "lost": len(lost), "lost_keys": lost[:10],
+    "accepted_twice": len(twice), "lost": len(lost) + reused, "lost_keys": lost[:10],
+    "keys_reused": reused,
     "unexpected": len(unexpected), "rejected": s["rejected"],
-    "sessions": sessions, "pending_at_kill": int(pending_at_kill) if pending_at_kill.isdigit() else None,
+    "runs": per_run, "pending_at_kill": int(pending_at_kill) if pending_at_kill.isdigit() else None,
     "spool_max_pending_bytes": a["max_pending_bytes"], "spool_max_file_bytes": a["max_file_bytes"],
     "spool_max_disk_bytes": a["max_disk_bytes"], "spool_cap_bytes": cap,
     "spool_final_pending": len(last.get("pending", [])),

@@ -44,12 +44,14 @@ def dir_bytes(path):
 
 
 class AgentMonitor:
+    """One entry per agent process (pid), in order of appearance: a restarted agent may
+    reuse (session, seq) keys (e.g. after clear_spool), so runs are not merged by key."""
+
     def __init__(self, robot, spool):
         self.lock = threading.Lock()
         self.spool = spool
-        self.s = {"created": [], "replayed": [], "sessions": {}, "last": None, "statuses": 0,
-                  "max_pending_bytes": 0, "max_file_bytes": 0, "max_disk_bytes": 0,
-                  "cap_bytes": None, "windows": {}}
+        self.s = {"runs": [], "last": None, "statuses": 0, "max_pending_bytes": 0,
+                  "max_file_bytes": 0, "max_disk_bytes": 0, "cap_bytes": None}
         rospy.Subscriber("/%s/uplink_status" % robot, String, self.on_status, queue_size=100)
 
     def on_status(self, msg):
@@ -57,17 +59,17 @@ class AgentMonitor:
         with self.lock:
             s = self.s
             s["statuses"] += 1
-            for key in j["created"]:
-                if key not in s["created"]:
-                    s["created"].append(key)
-            for key in j["replayed"]:
-                if key not in s["replayed"]:
-                    s["replayed"].append(key)
-            # Per session (= per agent process): its own counters, last seen.
-            s["sessions"][str(j["session"])] = {
-                "created": len(j["created"]), "windows": j["windows"], "sends": j["sends"],
-                "resends": j["resends"], "acked": j["acked"], "pending": len(j["pending"]),
-                "replayed": len(j["replayed"]), "done": j["done"]}
+            run = next((r for r in s["runs"] if r["pid"] == j["pid"]), None)
+            if run is None:
+                run = {"pid": j["pid"], "created": [], "replayed": []}
+                s["runs"].append(run)
+            for field in ("created", "replayed"):  # a latched status can be missed, never shrinks
+                for key in j[field]:
+                    if key not in run[field]:
+                        run[field].append(key)
+            run.update({"uuid": j["uuid"], "session": j["session"], "windows": j["windows"],
+                        "sends": j["sends"], "resends": j["resends"], "acked": j["acked"],
+                        "pending": j["pending"], "done": j["done"]})
             s["max_pending_bytes"] = max(s["max_pending_bytes"], j["spool_pending_bytes"])
             s["max_file_bytes"] = max(s["max_file_bytes"], j["spool_file_bytes"])
             s["cap_bytes"] = j["spool_cap_bytes"]
