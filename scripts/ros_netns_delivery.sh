@@ -219,7 +219,7 @@ start_agent() {  # start_agent <log> <clear_spool>
     "clear_spool:=$2" "config:=$LOGS/config.yaml"
 }
 died() { grep -c "process has died" "$1" 2>/dev/null || true; }
-at() {  # at <seconds after the first agent start>
+at() {  # at <seconds after T0 (the first submap)>
   local now; now=$(awk -v a="$T0" -v b="$(date +%s.%N)" 'BEGIN{print b-a}')
   awk -v n="$now" -v t="$1" 'BEGIN{exit !(t > n)}' && sleep "$(awk -v n="$now" -v t="$1" 'BEGIN{print t-n}')"
   return 0
