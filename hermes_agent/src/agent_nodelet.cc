@@ -7,6 +7,9 @@
 //        /hermes/submap_ack (acks for this agent's uuid)
 //   out: odom (nav_msgs/Odometry, frame <robot>/odom, child <robot>/base_link),
 //        TF <robot>/odom -> <robot>/base_link, /hermes/submap, /hermes/heartbeat (1 Hz)
+//        uplink_status (std_msgs/String JSON, latched; after every new submap and at
+//        1 Hz): session, submaps created by this process, spool pending keys/bytes,
+//        spool cap -- what the delivery tests count as "sent"
 // Params (private): robot (default: the namespace), mode (stereo|rgbd),
 // config (YAML, default config/hermes.yaml), dataset (optional folder: camera and
 // body<-camera extrinsic taken from it instead of camera_info), spool_dir
@@ -23,12 +26,17 @@
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <std_msgs/Empty.h>
+#include <std_msgs/String.h>
 #include <tf2_ros/transform_broadcaster.h>
+
+#include <unistd.h>
 
 #include <filesystem>
 #include <memory>
 #include <mutex>
 #include <optional>
+
+#include <nlohmann/json.hpp>
 
 #include "hermes/agent/agent_pipeline.h"
 #include "hermes/agent/run_config.h"
@@ -66,9 +74,17 @@ class AgentNodelet : public nodelet::Nodelet {
     pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
     bool clear_spool = false;  // tests and demos: start without the previous run's backlog
     pnh.param("clear_spool", clear_spool, clear_spool);
-    if (clear_spool) {
-      std::error_code ec;
-      std::filesystem::remove_all(params_.uplink.buffer.dir, ec);
+    if (clear_spool) {  // drop the backlog, keep the session counter (see discardPending)
+      auto spool = hermes::agent::MapBuffer::open(params_.uplink.buffer);
+      auto dropped = spool.ok() ? spool->discardPending()
+                                : hermes::Expected<std::size_t>(hermes::Error{spool.error()});
+      if (!dropped.ok()) {
+        NODELET_FATAL("Agent %s: clear_spool: %s", robot_.c_str(), dropped.error().c_str());
+        return;
+      }
+      if (*dropped > 0)
+        NODELET_WARN("Agent %s: clear_spool: dropped %zu unacknowledged submaps of a previous run",
+                     robot_.c_str(), *dropped);
     }
     if (!dataset.empty()) {  // camera from the dataset folder (rectified K, T_B_C)
       auto ds = hermes::Dataset::open(dataset, run.dataset);
@@ -82,6 +98,7 @@ class AgentNodelet : public nodelet::Nodelet {
     odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 50);
     submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
     heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
+    uplink_status_pub_ = nh.advertise<std_msgs::String>("uplink_status", 20, true);
     ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
     done_sub_ = nh.subscribe("done", 1, &AgentNodelet::onDone, this);
     const bool stereo = mode_ == "stereo";
@@ -136,6 +153,8 @@ class AgentNodelet : public nodelet::Nodelet {
     (*p)->setUplinkClock([] { return ros::WallTime::now().toSec(); });
     pipeline_ = std::move(*p);
     uuid_ = hermes::toString(pipeline_->agentId());
+    replayed_ = pipeline_->uplink()->buffer().pendingKeys();  // a previous run's backlog
+    publishUplinkStatus();
     NODELET_INFO("Agent %s: uuid %s session %u", robot_.c_str(), uuid_.c_str(), pipeline_->session());
     return true;
   }
@@ -157,6 +176,7 @@ class AgentNodelet : public nodelet::Nodelet {
     frame.left = *left;
     (mode_ == "stereo" ? frame.right : frame.depth) = *other;
     auto r = pipeline_->feed(frame);
+    noteSubmitted();
     if (!r.ok()) {
       NODELET_ERROR_THROTTLE(2.0, "Agent %s: %s", robot_.c_str(), r.error().c_str());
       return;
@@ -195,6 +215,9 @@ class AgentNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mu_);
     if (!pipeline_) return;
     pipeline_->flushWindow();
+    noteSubmitted();
+    done_ = true;
+    publishUplinkStatus();
     NODELET_INFO("Agent %s: sequence done, %lld frames, lost %.1f %%, %lld submaps", robot_.c_str(),
                  static_cast<long long>(pipeline_->frames()), 100.0 * pipeline_->lostRate(),
                  static_cast<long long>(pipeline_->submapsSent()));
@@ -213,6 +236,46 @@ class AgentNodelet : public nodelet::Nodelet {
     hb.session = pipeline_->session();
     hb.name = robot_;
     heartbeat_pub_.publish(hb);
+    publishUplinkStatus();
+  }
+
+  /// Records a submap the last window step handed to the uplink (call after each step).
+  void noteSubmitted() {
+    const auto last = pipeline_->lastSubmitted();
+    if (!last || (!created_.empty() && created_.back() == *last)) return;
+    created_.push_back(*last);
+    publishUplinkStatus();
+  }
+
+  void publishUplinkStatus() {
+    using Keys = std::vector<std::pair<std::uint32_t, std::uint64_t>>;
+    auto keys = [](const Keys& k) {
+      nlohmann::json a = nlohmann::json::array();
+      for (const auto& [session, seq] : k) a.push_back({session, seq});
+      return a;
+    };
+    const hermes::agent::UplinkSender& up = *pipeline_->uplink();
+    const hermes::agent::WindowCounters& w = pipeline_->windows();
+    nlohmann::json j;
+    j["robot"] = robot_;
+    j["uuid"] = uuid_;
+    j["pid"] = static_cast<std::int64_t>(::getpid());  // tells restarted processes apart
+    j["session"] = pipeline_->session();
+    j["created"] = keys(created_);
+    j["replayed"] = keys(replayed_);
+    j["pending"] = keys(up.buffer().pendingKeys());
+    j["windows"] = {{"total", w.windows}, {"submitted", w.sent}, {"deferred", w.deferred},
+                    {"failed", w.failed}, {"refused", w.refused}};
+    j["sends"] = up.stats().sends;
+    j["resends"] = up.stats().resends;
+    j["acked"] = up.stats().acked;
+    j["spool_pending_bytes"] = up.buffer().pendingBytes();
+    j["spool_file_bytes"] = up.buffer().fileBytes();
+    j["spool_cap_bytes"] = static_cast<std::int64_t>(params_.uplink.buffer.max_mbytes * 1e6);
+    j["done"] = done_;
+    std_msgs::String m;
+    m.data = j.dump();
+    uplink_status_pub_.publish(m);
   }
 
   std::mutex mu_;
@@ -221,7 +284,9 @@ class AgentNodelet : public nodelet::Nodelet {
   std::optional<hermes::agent::AgentCamera> camera_;
   std::optional<sensor_msgs::CameraInfo> left_info_, right_info_;
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
-  ros::Publisher odom_pub_, submap_pub_, heartbeat_pub_;
+  ros::Publisher odom_pub_, submap_pub_, heartbeat_pub_, uplink_status_pub_;
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> created_, replayed_;
+  bool done_ = false;
   ros::Subscriber ack_sub_, done_sub_, info_sub_, right_info_sub_;
   ImageSub first_, second_;
   std::unique_ptr<ImageSync> sync_;

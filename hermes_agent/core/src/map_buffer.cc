@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -268,15 +269,38 @@ Expected<std::uint32_t> MapBuffer::newSession() {
     have = true;
   }
   const std::uint32_t next = have ? last + 1 : 0;
+  if (Status s = writeSession(next); !s) return Error{s.error()};
+  return next;
+}
+
+Status MapBuffer::writeSession(std::uint32_t session) {
+  const std::string path = p_.dir + "/session";
   const std::string tmp = path + ".tmp";
   {
     std::ofstream out(tmp, std::ios::trunc);
-    out << next << "\n";
+    out << session << "\n";
     if (!out.flush()) return Error{"map buffer: cannot write '" + tmp + "'"};
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0)
     return Error{"map buffer: cannot write '" + path + "': " + std::strerror(errno)};
-  return next;
+  return Status::Ok();
+}
+
+Expected<std::size_t> MapBuffer::discardPending() {
+  const std::size_t dropped = pending_.size();
+  if (dropped == 0) return dropped;
+  // The counter must stay >= every dropped session (newSession() looked at them too).
+  std::uint32_t highest = pending_.rbegin()->first.first;
+  {
+    std::ifstream in(p_.dir + "/session");
+    std::uint32_t stored = 0;
+    if (in && (in >> stored)) highest = std::max(highest, stored);
+  }
+  if (Status s = writeSession(highest); !s) return Error{s.error()};
+  pending_.clear();
+  pending_bytes_ = 0;
+  if (Status s = compact(); !s) return Error{s.error()};
+  return dropped;
 }
 
 }  // namespace hermes::agent

@@ -121,6 +121,42 @@ TEST(MapBuffer, SessionsIncreaseAcrossRestarts) {
   EXPECT_GT(second, first + 5);
 }
 
+// clear_spool used to delete the whole spool folder, session counter included: the
+// restarted agent began at session 0 again and the server, which had seen (0, 0..n) from
+// the previous run, acknowledged the new submaps as duplicates and never applied them.
+TEST(MapBuffer, DiscardPendingDropsBacklogButKeepsSessionsIncreasing) {
+  const auto p = params("discard");
+  std::uint32_t first;
+  {
+    auto b = MapBuffer::open(p);
+    ASSERT_TRUE(b.ok());
+    first = *b->newSession();
+    for (std::uint64_t s = 0; s < 3; ++s) ASSERT_TRUE(b->push(first, s, frame(100, 1)));
+    ASSERT_TRUE(b->ack(first, 0));
+    ASSERT_TRUE(b->push(first + 3, 0, frame(100, 2)));  // pending from a later session
+  }
+  {
+    auto b = MapBuffer::open(p);  // restart with "clear the backlog"
+    ASSERT_TRUE(b.ok());
+    auto dropped = b->discardPending();
+    ASSERT_TRUE(dropped.ok()) << dropped.error();
+    EXPECT_EQ(*dropped, 3u);
+    EXPECT_EQ(b->pendingCount(), 0u);
+    EXPECT_EQ(b->pendingBytes(), 0u);
+    EXPECT_EQ(b->nextToSend(0.0), nullptr);
+  }
+  auto b = MapBuffer::open(p);
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(b->pendingCount(), 0u);  // the file was rewritten empty
+  const std::uint32_t next = *b->newSession();
+  EXPECT_GT(next, first + 3) << "a session of the discarded backlog would be reused";
+  EXPECT_TRUE(b->push(next, 0, frame(10, 3)));
+  auto empty = b->discardPending();  // nothing pending but the new one
+  ASSERT_TRUE(empty.ok());
+  EXPECT_EQ(*empty, 1u);
+  EXPECT_GT(*b->newSession(), next);
+}
+
 TEST(MapBuffer, BadParamsNameTheKey) {
   MapBufferParams p;
   auto b = MapBuffer::open(p);

@@ -83,6 +83,10 @@ class AgentPipeline {
   const UplinkSender* uplink() const { return uplink_.get(); }
   UplinkSender* uplink() { return uplink_.get(); }
   const Uuid& agentId() const { return agent_id_; }
+  /// (session, seq) of the last submap handed to the uplink, nullopt before the first.
+  std::optional<std::pair<std::uint32_t, std::uint64_t>> lastSubmitted() const {
+    return last_window_;
+  }
   std::uint32_t session() const { return session_; }
 
  private:

@@ -67,12 +67,24 @@ class MapBuffer {
   void resetSendTimes();
 
   std::size_t pendingCount() const { return pending_.size(); }
+  /// (session, seq) of every pending submap, in sending order.
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> pendingKeys() const {
+    std::vector<std::pair<std::uint32_t, std::uint64_t>> keys;
+    for (const auto& [key, s] : pending_) keys.push_back(key);
+    return keys;
+  }
   std::size_t pendingBytes() const { return pending_bytes_; }
   std::size_t fileBytes() const { return file_bytes_; }
   /// Bytes cut off a torn tail record when the spool was opened (0 normally).
   std::size_t recoveredTornBytes() const { return torn_bytes_; }
   /// Next session number for this agent: persisted, increases on every call.
   Expected<std::uint32_t> newSession();
+  /// Drops every pending submap (start without a previous run's backlog) and rewrites
+  /// the spool file empty; returns how many were dropped. The session counter is kept
+  /// (and raised to the highest dropped session), so newSession() still moves past every
+  /// session this agent used: a reused (session, seq) would be taken by the server for a
+  /// duplicate of the old run's submap, acknowledged and never applied.
+  Expected<std::size_t> discardPending();
 
  private:
   explicit MapBuffer(MapBufferParams p);
@@ -80,6 +92,7 @@ class MapBuffer {
   Status append(std::uint8_t type, std::uint32_t session, std::uint64_t seq,
                 const std::vector<std::uint8_t>& payload);
   Status compact();
+  Status writeSession(std::uint32_t session);
   std::string spoolPath() const;
 
   MapBufferParams p_;
