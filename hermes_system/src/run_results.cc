@@ -228,7 +228,8 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                            [&](std::ostream& o) {
                              o.precision(15);
                              o << "agent_a,keyframe_a,agent_b,keyframe_b,accepted,tx,ty,tz,"
-                                  "stamp_a,stamp_b,gt_distance_m,error_m,error_deg\n";
+                                  "inliers,depth_inliers,sigma_t_m,stamp_a,stamp_b,gt_distance_m,"
+                                  "error_m,error_deg\n";
                              for (const server::LoopEdge& l : run.server().map().loops) {
                                const OfflineAgent* a = agentOfRobot(run, l.a.agent);
                                const OfflineAgent* b = agentOfRobot(run, l.b.agent);
@@ -236,7 +237,12 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                                  << (b ? b->name : "?") << ',' << l.b.id << ','
                                  << (l.accepted ? 1 : 0) << ',' << l.T_a_b.translation().x()
                                  << ',' << l.T_a_b.translation().y() << ','
-                                 << l.T_a_b.translation().z();
+                                 << l.T_a_b.translation().z() << ',' << l.inliers << ','
+                                 << l.depth_inliers << ','
+                                 << std::sqrt(std::max(0.0, Mat3(l.covariance.topLeftCorner<3, 3>())
+                                                                .selfadjointView<Eigen::Upper>()
+                                                                .eigenvalues()
+                                                                .maxCoeff()));
                                if (const auto c = checkLoop(run, l))  // empty without ground truth
                                  o << ',' << c->stamp_a << ',' << c->stamp_b << ','
                                    << c->gt_distance_m << ',' << c->err_m << ',' << c->err_deg;

@@ -193,6 +193,7 @@ LoopClosureResult solveGeneralizedRelativePose(const GeneralizedCorrespondences&
   res.T_refQ_refC = ref.T_refQ_refC;
   res.inliers = ref.inliers;
   res.num_inliers = static_cast<int>(ref.inliers.size());
+  res.num_depth_inliers = ref.depth_inliers;
   res.sigma_px = ref.sigma_px;
   const double ratio = static_cast<double>(res.num_inliers) / res.num_matches;
   if (res.num_inliers < params.min_inliers || ratio < params.min_inlier_ratio) {

@@ -248,6 +248,7 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
     sq_sum += r.squaredNorm();
     num_residuals += 4 + (terms[k].dq ? 1 : 0) + (terms[k].dc ? 1 : 0);
     out.inliers.push_back(ids[k]);
+    if (terms[k].dq || terms[k].dc) ++out.depth_inliers;
   }
   const int n = static_cast<int>(out.inliers.size());
   if (n < 7) {

@@ -17,6 +17,7 @@ struct Refinement {
   std::string reason;          ///< why the information could not be formed
   SE3 T_refQ_refC;
   std::vector<int> inliers;    ///< within the pixel threshold after refinement
+  int depth_inliers = 0;       ///< of which with a measured depth in at least one view
   Mat6 information = Mat6::Zero();
   Mat6 covariance = Mat6::Zero();
   double sigma_px = 0;         ///< pixel noise used for the information

@@ -189,6 +189,8 @@ void MapManager::detectLoops(const KeyframeKey& key, MergeStats* stats) {
     if (loop_hook_) loop_hook_(e.a, e.b, &e.T_a_b);
     e.information = r.information;
     e.covariance = r.covariance;
+    e.inliers = r.num_inliers;
+    e.depth_inliers = r.num_depth_inliers;
     map_.loops.push_back(e);
   }
 }

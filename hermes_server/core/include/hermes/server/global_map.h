@@ -54,6 +54,8 @@ struct LoopEdge {
   Mat6 information = Mat6::Identity();
   Mat6 covariance = Mat6::Identity();
   bool accepted = false;      ///< by PCM (latest run)
+  int inliers = 0;            ///< geometric inliers of the loop closure
+  int depth_inliers = 0;      ///< of which with a measured depth in at least one view
 };
 
 class GlobalMap {
