@@ -76,22 +76,21 @@ Status ProjectionMatchParams::validate() const {
   return Status::Ok();
 }
 
-std::vector<int> matchByProjection(const std::vector<LandmarkView>& landmarks,
-                                   const SE3& T_C_W, const PinholeIntrinsics& K,
-                                   const FeatureSet& frame, const KeypointGrid& grid,
-                                   const ProjectionMatchParams& p) {
+namespace {
+
+/// Matching core: landmark i against the keypoints `candidates(i)` returns
+/// (empty = skip), ratio test, one landmark per keypoint, orientation check.
+template <typename Candidates>
+std::vector<int> matchLandmarks(const std::vector<LandmarkView>& landmarks, const FeatureSet& frame,
+                                const ProjectionMatchParams& p, Candidates candidates) {
   HERMES_CHECK(frame.descriptors.size() == frame.keypoints.size(),
-               "matchByProjection: one descriptor per keypoint");
+               "landmark matching: one descriptor per keypoint");
   const int n = int(landmarks.size());
   std::vector<int> match(n, -1), dist(n, 0);
   std::vector<int> owner(frame.size(), -1);  // keypoint -> landmark
   for (int i = 0; i < n; ++i) {
-    const Vec3 p_C = T_C_W * landmarks[i].p_W;
-    if (p_C.z() < p.min_depth) continue;
-    const Vec2 uv = K.project(p_C);
-    if (!K.inImage(uv)) continue;
     int best = std::numeric_limits<int>::max(), second = best, best_j = -1;
-    for (int j : grid.query(uv.x(), uv.y(), p.radius_px)) {
+    for (int j : candidates(i)) {
       const int d = hammingDistance(landmarks[i].descriptor, frame.descriptors[j]);
       if (d < best) {
         second = best;
@@ -134,6 +133,28 @@ std::vector<int> matchByProjection(const std::vector<LandmarkView>& landmarks,
     }
   }
   return match;
+}
+
+}  // namespace
+
+std::vector<int> matchByProjection(const std::vector<LandmarkView>& landmarks,
+                                   const SE3& T_C_W, const PinholeIntrinsics& K,
+                                   const FeatureSet& frame, const KeypointGrid& grid,
+                                   const ProjectionMatchParams& p) {
+  return matchLandmarks(landmarks, frame, p, [&](int i) -> std::vector<int> {
+    const Vec3 p_C = T_C_W * landmarks[i].p_W;
+    if (p_C.z() < p.min_depth) return {};
+    const Vec2 uv = K.project(p_C);
+    if (!K.inImage(uv)) return {};
+    return grid.query(uv.x(), uv.y(), p.radius_px);
+  });
+}
+
+std::vector<int> matchByDescriptor(const std::vector<LandmarkView>& landmarks,
+                                   const FeatureSet& frame, const ProjectionMatchParams& p) {
+  std::vector<int> all(frame.size());
+  for (std::size_t j = 0; j < all.size(); ++j) all[j] = int(j);
+  return matchLandmarks(landmarks, frame, p, [&](int) -> const std::vector<int>& { return all; });
 }
 
 }  // namespace hermes

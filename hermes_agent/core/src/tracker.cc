@@ -23,7 +23,8 @@ Status TrackerParams::read(const Config& c) {
     if (!s) return s;
   for (auto [key, ptr] : {std::pair<const char*, int*>{"init_min_points", &init_min_points},
                           {"min_tracked", &min_tracked},
-                          {"local_map_keyframes", &local_map_keyframes}}) {
+                          {"local_map_keyframes", &local_map_keyframes},
+                          {"relocalise_keyframes", &relocalise_keyframes}}) {
     Status s = c.get(std::string("tracker.") + key, ptr);
     if (!s) return s;
   }
@@ -45,6 +46,7 @@ void TrackerParams::write(ConfigWriter* w) const {
   w->set("tracker.min_tracked", min_tracked);
   w->set("tracker.local_map_keyframes", local_map_keyframes);
   w->set("tracker.relocalise_radius_px", relocalise_radius_px);
+  w->set("tracker.relocalise_keyframes", relocalise_keyframes);
 }
 
 Status TrackerParams::validate() const {
@@ -56,6 +58,7 @@ Status TrackerParams::validate() const {
     return Error{"tracker.min_tracked must be >= pose.min_inliers"};
   if (local_map_keyframes < 1) return Error{"tracker.local_map_keyframes must be >= 1"};
   if (!(relocalise_radius_px > 0)) return Error{"tracker.relocalise_radius_px must be > 0"};
+  if (relocalise_keyframes < 0) return Error{"tracker.relocalise_keyframes must be >= 0"};
   return Status::Ok();
 }
 
@@ -133,12 +136,10 @@ void Tracker::insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& f
   keyframes_.push_back(std::move(kf));
 }
 
-std::vector<std::size_t> Tracker::localMap() const {
+std::vector<std::size_t> Tracker::localMap(int keyframes) const {
   std::set<std::size_t> ids;
   const std::size_t first =
-      keyframes_.size() > std::size_t(params_.local_map_keyframes)
-          ? keyframes_.size() - params_.local_map_keyframes
-          : 0;
+      keyframes_.size() > std::size_t(keyframes) ? keyframes_.size() - keyframes : 0;
   for (std::size_t k = first; k < keyframes_.size(); ++k)
     for (LandmarkId id : keyframes_[k].keypoint_landmark)
       if (id != kInvalidId && !mapper_.isBad(id)) ids.insert(id);
@@ -175,13 +176,17 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   const SE3 T_C_W_pred = was_ok && have_velocity_
                              ? (T_C_W_last_ * T_C_W_prev_.inverse()) * T_C_W_last_
                              : T_C_W_last_;
-  const auto local = localMap();
-  std::vector<LandmarkView> views(local.size());
-  for (std::size_t i = 0; i < local.size(); ++i) {
-    views[i].p_W = landmarks_[local[i]].p_A;
-    views[i].descriptor = landmarks_[local[i]].descriptor;
-    views[i].angle = landmark_angle_[local[i]];
-  }
+  auto local = localMap(params_.local_map_keyframes);
+  auto viewsOf = [&](const std::vector<std::size_t>& ids) {
+    std::vector<LandmarkView> v(ids.size());
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      v[i].p_W = landmarks_[ids[i]].p_A;
+      v[i].descriptor = landmarks_[ids[i]].descriptor;
+      v[i].angle = landmark_angle_[ids[i]];
+    }
+    return v;
+  };
+  std::vector<LandmarkView> views = viewsOf(local);
   KeypointGrid grid(fs.keypoints, K_.width, K_.height);
   ProjectionMatchParams mp = params_.matching;
   if (!was_ok) mp.radius_px = params_.relocalise_radius_px;
@@ -197,19 +202,36 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
 
   Correspondences c;
   std::vector<int> corr_landmark, corr_keypoint;
-  for (std::size_t i = 0; i < match.size(); ++i) {
-    if (match[i] < 0) continue;
-    const Keypoint& k = fs.keypoints[match[i]];
-    c.p_W.push_back(views[i].p_W);
-    c.uv.push_back(Vec2(k.u, k.v));
-    c.sigma_px.push_back(fs.scales[k.octave]);
-    corr_landmark.push_back(int(local[i]));
-    corr_keypoint.push_back(match[i]);
-  }
-  Expected<PoseEstimate> est = Error{"no pose"};
-  if (int(c.size()) >= params_.pose.min_inliers) {
-    if (was_ok) est = refinePose(c, K_, T_C_W_pred, params_.pose);
-    if (!est.ok() || est->num_inliers < params_.min_tracked) est = estimatePose(c, K_, params_.pose);
+  auto solve = [&](bool refine_first) {
+    c = Correspondences();
+    corr_landmark.clear();
+    corr_keypoint.clear();
+    for (std::size_t i = 0; i < match.size(); ++i) {
+      if (match[i] < 0) continue;
+      const Keypoint& k = fs.keypoints[match[i]];
+      c.p_W.push_back(views[i].p_W);
+      c.uv.push_back(Vec2(k.u, k.v));
+      c.sigma_px.push_back(fs.scales[k.octave]);
+      corr_landmark.push_back(int(local[i]));
+      corr_keypoint.push_back(match[i]);
+    }
+    Expected<PoseEstimate> e = Error{"no pose"};
+    if (int(c.size()) >= params_.pose.min_inliers) {
+      if (refine_first) e = refinePose(c, K_, T_C_W_pred, params_.pose);
+      if (!e.ok() || e->num_inliers < params_.min_tracked) e = estimatePose(c, K_, params_.pose);
+    }
+    return e;
+  };
+  Expected<PoseEstimate> est = solve(was_ok);
+  const bool failed = !est.ok() || est->num_inliers < params_.min_tracked;
+  if (failed && !was_ok && params_.relocalise_keyframes > 0) {
+    // Relocalisation without a pose prior: the landmarks of the last keyframes
+    // matched by descriptor alone, PnP RANSAC.
+    local = localMap(params_.relocalise_keyframes);
+    views = viewsOf(local);
+    match = matchByDescriptor(views, fs, params_.matching);
+    r.matched = count(match);
+    est = solve(false);
   }
   if (!est.ok() || est->num_inliers < params_.min_tracked) {
     status_ = TrackingStatus::kLost;

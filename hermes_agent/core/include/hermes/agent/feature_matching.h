@@ -59,4 +59,9 @@ std::vector<int> matchByProjection(const std::vector<LandmarkView>& landmarks,
                                    const FeatureSet& frame, const KeypointGrid& grid,
                                    const ProjectionMatchParams& params);
 
+/// The same without a pose (relocalisation): every landmark against every
+/// keypoint (radius and min_depth unused).
+std::vector<int> matchByDescriptor(const std::vector<LandmarkView>& landmarks,
+                                   const FeatureSet& frame, const ProjectionMatchParams& params);
+
 }  // namespace hermes

@@ -54,6 +54,9 @@ struct TrackerParams {
   int min_tracked = 25;           ///< inliers for tracking to count as OK
   int local_map_keyframes = 6;    ///< landmarks of the last N keyframes form the local map
   double relocalise_radius_px = 40;  ///< search radius when lost
+  /// When lost and the projection search fails: match the landmarks of the last N
+  /// keyframes to the frame by descriptor alone + PnP RANSAC (0 = off).
+  int relocalise_keyframes = 30;
 
   /// Reads sections orb, stereo, rgbd, matching, pose, keyframe, mapping, window and tracker.
   Status read(const Config& config);
@@ -102,7 +105,8 @@ class Tracker {
   bool initialise(const CameraFrame& frame, FeatureSet& features, TrackResult* result);
   void insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& features,
                       const std::vector<int>& keypoint_landmark);
-  std::vector<std::size_t> localMap() const;
+  /// Landmarks seen by the last `keyframes` keyframes (good ones only).
+  std::vector<std::size_t> localMap(int keyframes) const;
   void runLocalMapping(TrackResult* r, const std::vector<float>& scales);
 
   TrackerParams params_;
