@@ -91,8 +91,8 @@ struct DistillParams {
   double trim_time_limit_s = 0.05;
 
   // Odometry edges.
-  double odom_sigma_trans = 0.02;
-  double odom_sigma_rot = 0.005;
+  double odom_sigma_trans = 0.003;  // VO between keyframes is mm-accurate; looser lets loops bend it
+  double odom_sigma_rot = 0.001;
   int odom_shared_ref = 50;
 
   // Initial byte model.
