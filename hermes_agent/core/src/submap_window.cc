@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "hermes/agent/covisibility.h"
 
@@ -86,6 +87,67 @@ Submap buildWindow(const std::vector<Keyframe>& kfs, const std::vector<Landmark>
     s.odometry.push_back(e);
   }
   return s;
+}
+
+Expected<Submap> mergeWindows(Submap earlier, const Submap& later) {
+  if (earlier.cameras.size() != later.cameras.size())
+    return Error{"cannot merge windows with different camera tables"};
+  for (std::size_t i = 0; i < later.cameras.size(); ++i) {
+    const PinholeIntrinsics &a = earlier.cameras[i], &b = later.cameras[i];
+    if (a.fx != b.fx || a.fy != b.fy || a.cx != b.cx || a.cy != b.cy || a.width != b.width ||
+        a.height != b.height)
+      return Error{"cannot merge windows with different camera tables"};
+  }
+  Submap out = std::move(earlier);
+  const double t_start = out.keyframes.empty() ? later.header.t_start : out.header.t_start;
+  out.header = later.header;
+  out.header.t_start = t_start;
+  out.keyframes.insert(out.keyframes.end(), later.keyframes.begin(), later.keyframes.end());
+  std::unordered_map<LandmarkId, std::size_t> index;
+  for (std::size_t i = 0; i < out.landmarks.size(); ++i) index.emplace(out.landmarks[i].id, i);
+  for (const Landmark& l : later.landmarks) {
+    auto it = index.find(l.id);
+    if (it == index.end()) {
+      index.emplace(l.id, out.landmarks.size());
+      out.landmarks.push_back(l);
+      continue;
+    }
+    Landmark& m = out.landmarks[it->second];
+    m.p_A = l.p_A;
+    m.descriptor = l.descriptor;
+    m.observations.insert(m.observations.end(), l.observations.begin(), l.observations.end());
+  }
+  out.odometry.insert(out.odometry.end(), later.odometry.begin(), later.odometry.end());
+  return out;
+}
+
+std::size_t keepNewestKeyframes(Submap* s, std::size_t max_keyframes) {
+  if (s->keyframes.size() <= max_keyframes) return 0;
+  const std::size_t drop = s->keyframes.size() - max_keyframes;
+  std::unordered_set<KeyframeId> dropped;
+  for (std::size_t i = 0; i < drop; ++i) dropped.insert(s->keyframes[i].id);
+  s->keyframes.erase(s->keyframes.begin(), s->keyframes.begin() + static_cast<std::ptrdiff_t>(drop));
+  std::vector<Landmark> kept;
+  for (Landmark& l : s->landmarks) {
+    std::vector<Observation> obs;
+    for (const Observation& o : l.observations)
+      if (!dropped.count(o.keyframe)) obs.push_back(o);
+    if (obs.empty()) continue;
+    l.observations = std::move(obs);
+    kept.push_back(std::move(l));
+  }
+  s->landmarks = std::move(kept);
+  std::unordered_set<LandmarkId> alive;
+  for (const Landmark& l : s->landmarks) alive.insert(l.id);
+  for (Keyframe& kf : s->keyframes)
+    for (LandmarkId& id : kf.keypoint_landmark)
+      if (id != kInvalidId && !alive.count(id)) id = kInvalidId;
+  std::vector<OdometryEdge> edges;
+  for (const OdometryEdge& e : s->odometry)
+    if (!dropped.count(e.from) && !dropped.count(e.to)) edges.push_back(e);
+  s->odometry = std::move(edges);
+  if (!s->keyframes.empty()) s->header.t_start = s->keyframes.front().stamp;
+  return drop;
 }
 
 }  // namespace hermes

@@ -221,6 +221,27 @@ TEST(WindowStep, DistillsAndEncodesEveryWindowWithinBudget) {
   EXPECT_EQ(timings.count("distill"), std::size_t(counters.windows));
   EXPECT_EQ(timings.count("encode"), std::size_t(counters.sent));
 
+  // Windows refused by the uplink (spool full) are carried into the next one,
+  // not lost: the first accepted submap spans all three.
+  SyntheticWindowSource source2(&*scene);
+  agent::WindowCounters carry;
+  std::vector<Submap> accepted;
+  int refusals = 2;
+  agent::WindowSink sink;
+  sink.submit = [&](const Submap& s, std::vector<std::uint8_t>&&) -> Status {
+    if (refusals-- > 0) return Error{"spool full"};
+    accepted.push_back(s);
+    return Status::Ok();
+  };
+  for (int i = 0; i <= 200; ++i)  // windows at 5, 10, 15 s
+    agent::runWindowStep(source2, **distiller, monitor, 5.0 + 0.05 * i, &carry, &timings, &sink);
+  EXPECT_EQ(carry.refused, 2);
+  EXPECT_EQ(carry.carried, 2);
+  ASSERT_EQ(accepted.size(), 1u);
+  EXPECT_LT(accepted[0].header.t_start, accepted[0].header.t_end - 10.0)
+      << "the accepted submap must span the two refused windows too";
+  EXPECT_FALSE(carry.carry.has_value());
+
   NoWindows none;
   agent::WindowCounters zero;
   agent::runWindowStep(none, **distiller, monitor, 10.0, &zero, &timings);

@@ -1,5 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <map>
+#include <set>
+
 #include "hermes/agent/submap_window.h"
 #include "hermes/agent/tracker.h"
 #include "room_sequence.h"
@@ -83,4 +86,47 @@ TEST(SubmapWindow, OdometryInformationGrowsWithSharedLandmarks) {
   EXPECT_GT(odometryInformation(0, p)(0, 0), 0);  // clamped, never singular
   p.period_s = 0;
   EXPECT_FALSE(p.validate().ok());
+}
+
+TEST(SubmapWindow, DeferredWindowMergesIntoTheNextAndCanBeBounded) {
+  TrackerParams p;
+  p.window.period_s = 0.5;
+  Tracker tracker(p, test::roomK(), 0.11);
+  std::vector<Submap> windows;
+  auto st = test::runRoomSequence(&tracker, true, 40, [&](double t, const TrackResult&) {
+    if (auto w = tracker.takeWindowIfDue(t)) windows.push_back(std::move(*w));
+  });
+  ASSERT_GT(st.frames, 0) << "opencv-doc photos missing";
+  ASSERT_GE(windows.size(), 3u);
+  auto merged = mergeWindows(windows[0], windows[1]);
+  ASSERT_TRUE(merged.ok()) << merged.error();
+  merged = mergeWindows(std::move(*merged), windows[2]);
+  ASSERT_TRUE(merged.ok()) << merged.error();
+  const Submap& m = *merged;
+  EXPECT_EQ(m.validate(), "");
+  EXPECT_EQ(m.keyframes.size(),
+            windows[0].keyframes.size() + windows[1].keyframes.size() + windows[2].keyframes.size());
+  EXPECT_EQ(m.header.seq, windows[2].header.seq);
+  EXPECT_DOUBLE_EQ(m.header.t_start, windows[0].header.t_start);
+  EXPECT_DOUBLE_EQ(m.header.t_end, windows[2].header.t_end);
+  // A landmark seen in two windows is one landmark with the observations of both.
+  std::size_t obs = 0;
+  for (const Submap* w : {&windows[0], &windows[1], &windows[2]}) obs += w->observationCount();
+  EXPECT_EQ(m.observationCount(), obs);
+  std::set<LandmarkId> ids;
+  for (const Landmark& l : m.landmarks) EXPECT_TRUE(ids.insert(l.id).second) << "landmark twice";
+
+  // Bounded carry: the oldest keyframes go, what stays is consistent.
+  Submap bounded = m;
+  const std::size_t keep = windows[2].keyframes.size() + 1;
+  EXPECT_EQ(keepNewestKeyframes(&bounded, keep), m.keyframes.size() - keep);
+  EXPECT_EQ(bounded.keyframes.size(), keep);
+  EXPECT_EQ(bounded.validate(), "");
+  EXPECT_EQ(bounded.keyframes.back().id, m.keyframes.back().id);
+  EXPECT_DOUBLE_EQ(bounded.header.t_start, bounded.keyframes.front().stamp);
+  EXPECT_EQ(keepNewestKeyframes(&bounded, 1000), 0u);
+
+  Submap other = windows[1];
+  other.cameras[0].fx += 1;
+  EXPECT_FALSE(mergeWindows(windows[0], other).ok());
 }

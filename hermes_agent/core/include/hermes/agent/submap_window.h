@@ -40,4 +40,17 @@ Submap buildWindow(const std::vector<Keyframe>& keyframes, const std::vector<Lan
 /// The information matrix documented above.
 Mat6 odometryInformation(int shared_landmarks, const SubmapWindowParams& params);
 
+/// One window made of a window that could not be sent (deferred: link down or
+/// too slow; refused: spool full) and the next one: keyframes of both (ids are
+/// disjoint), landmarks united by id (position and descriptor of `later`,
+/// observations of both), both windows' odometry edges (the server bridges the
+/// two with an edge from the keyframe poses), header of `later` spanning both.
+/// Errors when the camera tables differ (then `earlier` cannot be merged).
+Expected<Submap> mergeWindows(Submap earlier, const Submap& later);
+
+/// Keeps the newest `max_keyframes` keyframes of `s` (drops the oldest, their
+/// observations, odometry edges and landmarks left unobserved); returns how
+/// many keyframes were dropped.
+std::size_t keepNewestKeyframes(Submap* s, std::size_t max_keyframes);
+
 }  // namespace hermes

@@ -14,16 +14,27 @@
 #include <utility>
 
 #include "hermes/agent/bandwidth_monitor.h"
+#include "hermes/agent/submap_window.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/distill/distiller.h"
 
 namespace hermes::agent {
 
+/// A window that could not be sent is not lost: it is carried and merged into
+/// the next window (mergeWindows), whose distillation then decides what of both
+/// fits the budget. Over a long outage the carried map is bounded to its newest
+/// kMaxCarryKeyframes keyframes (the oldest are dropped and counted).
+constexpr std::size_t kMaxCarryKeyframes = 400;
+
+/// Counters of the window step, and the carried window.
 struct WindowCounters {
   std::int64_t windows = 0, sent = 0, deferred = 0, failed = 0;
   std::int64_t refused = 0;  ///< encoded but refused by the uplink's buffer (full)
   std::int64_t bytes = 0;  ///< encoded bytes of the sent submaps
+  std::int64_t carried = 0;  ///< windows merged into a later one after deferral / refusal
+  std::int64_t carry_dropped_keyframes = 0;  ///< dropped by the kMaxCarryKeyframes bound
+  std::optional<Submap> carry;  ///< deferred / refused window waiting for the next
 };
 
 template <typename T, typename = void>
@@ -72,6 +83,18 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
     std::optional<Submap> window = tracker.takeWindowIfDue(stamp);
     if (!window) return;
     ++counters->windows;
+    if (counters->carry) {
+      auto merged = mergeWindows(std::move(*counters->carry), *window);
+      counters->carry.reset();
+      if (merged.ok()) {
+        *window = std::move(*merged);
+        ++counters->carried;
+      } else {
+        ++counters->failed;  // camera changed: the carried window cannot join this one
+      }
+      counters->carry_dropped_keyframes +=
+          static_cast<std::int64_t>(keepNewestKeyframes(&*window, kMaxCarryKeyframes));
+    }
     distill::CoordinatorInput in;
     in.bandwidth_Bps = monitor.planningRate(sink ? sink->link_now : stamp);
     in.backlog_bytes = sink ? sink->backlog_bytes : 0;
@@ -86,6 +109,7 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
     }
     if (r.report.deferred) {
       ++counters->deferred;
+      counters->carry = std::move(*window);
       return;
     }
     auto bytes = encodeSubmap(r.submap);
@@ -100,6 +124,7 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
     if (sink && sink->submit) {
       if (Status s = sink->submit(r.submap, std::move(*bytes)); !s) {
         ++counters->refused;
+        counters->carry = std::move(*window);
         return;
       }
     }
