@@ -44,6 +44,11 @@ const char* kUsage =
     "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility,false_candidates\n"
     "                   (default: all; the last three only at the two lowest bandwidths,\n"
     "                   false_candidates only unlimited)\n"
+    "  --swarm L        instead: swarm sizes (e.g. 2,4,6,8,10; at most 12) sharing one\n"
+    "                   --swarm-bandwidth link (default 50 Mbit/s, paper Fig. 18); robots\n"
+    "                   are the hall's trajectories from 0, 20, 40, 60 s; variants\n"
+    "                   default to hermes,raw\n"
+    "  --swarm-bandwidth M  shared link of the swarm sweep [Mbit/s] (default 50)\n"
     "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
 
 std::vector<std::string> split(const std::string& s) {
@@ -87,6 +92,107 @@ void injectFalseCandidates(system::OfflineRun& run, double fraction, std::size_t
   });
 }
 
+using Robots = std::vector<std::pair<std::string, fs::path>>;  // name, dataset folder
+
+/// The three hall robots rendered from `start` seconds of their trajectories
+/// (cached under cache/d<duration>_r<rate>[_s<start>]). One scene for every
+/// start: hermes_sim builds it around the whole trajectories.
+Expected<fs::path> renderCached(const std::string& cache, double duration, double rate, double start) {
+  char key[96];
+  if (start > 0)
+    std::snprintf(key, sizeof key, "d%g_r%g_s%g", duration, rate, start);
+  else
+    std::snprintf(key, sizeof key, "d%g_r%g", duration, rate);
+  const fs::path data = fs::path(cache) / key;
+  if (fs::exists(data / "done")) return data;
+  std::fprintf(stderr, "[bench system] rendering 3 robots x %g s (from %g s) at %g Hz into %s\n",
+               duration, start, rate, data.c_str());
+  fs::remove_all(data);
+  const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path();
+  std::string cmd = (bin / "hermes_sim").string();
+  for (const char* s : kSeqs)
+    cmd += std::string(" --trajectory ") + HERMES_SOURCE_DIR + "/config/trajectories/" + s + ".txt";
+  char tail[200];
+  std::snprintf(tail, sizeof tail, " --start %g --duration %g --rate %g --seed 1 >/dev/null 2>&1",
+                start, duration, rate);
+  cmd += " --out " + data.string() + tail;
+  if (std::system(cmd.c_str()) != 0) return Error{"rendering failed (" + cmd + ")"};
+  std::ofstream(data / "done") << "ok\n";
+  return data;
+}
+
+/// Swarm of n robots: the hall's three trajectories from starts 0, 20, 40, 60 s.
+Expected<Robots> swarmRobots(const std::string& cache, double duration, double rate, int n) {
+  Robots robots;
+  for (int k = 0; static_cast<int>(robots.size()) < n; ++k) {
+    const double start = 20.0 * k;
+    auto data = renderCached(cache, duration, rate, start);
+    if (!data.ok()) return Error{data.error()};
+    for (const char* seq : kSeqs)
+      if (static_cast<int>(robots.size()) < n)
+        robots.push_back({std::string(seq) + (k ? "_s" + std::to_string(20 * k) : ""), *data / seq});
+  }
+  return robots;
+}
+
+/// One offline run of `variant` with all `robots` sharing a `bw` Mbit/s link.
+Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw, const Robots& robots) {
+  std::vector<std::string> sets = variantSets(v);
+  sets.push_back("link.bandwidth_mbitps=" + bw);
+  sets.push_back("uplink.buffer.fsync=false");
+  auto config = agent::loadRunConfig("", sets);
+  if (!config.ok()) return Error{config.error()};
+  auto params = system::readSystemParams(*config);
+  if (!params.ok()) return Error{params.error()};
+  std::vector<system::AgentSource> sources;
+  for (const auto& [name, dir] : robots) {
+    auto ds = Dataset::open(dir.string(), params->run.dataset);
+    if (!ds.ok()) return Error{ds.error()};
+    sources.push_back({name, std::move(*ds), 0});
+  }
+  const std::string spool = (fs::temp_directory_path() / "hermes_bench_system_spool").string();
+  auto run = system::OfflineRun::create(*params, std::move(sources), spool, HERMES_SOURCE_DIR);
+  if (!run.ok()) return Error{run.error()};
+  std::size_t injected = 0;
+  if (v == "false_candidates") injectFalseCandidates(**run, 0.2, &injected);
+  const auto t0 = std::chrono::steady_clock::now();
+  if (Status s = (*run)->run(); !s) return Error{s.error()};
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const system::RunResults r = system::evaluateRun(**run);
+  nlohmann::json j = system::resultsJson(r);
+  j["variant"] = v;
+  j["agents"] = robots.size();
+  j["bandwidth_mbitps"] = std::atof(bw.c_str());
+  j["wall_s"] = wall;
+  j["lost_messages"] = (*run)->lostMessages();
+  if (v == "false_candidates") j["injected_false_candidates"] = injected;
+  double lost = 0;
+  int n = 0;
+  for (const AgentMetrics& a : r.metrics.per_agent)
+    if (a.lost_rate) lost += *a.lost_rate, ++n;
+  j["tracking_lost_rate_mean"] = n ? lost / n : 0.0;
+  return j;
+}
+
+void printRow(const std::string& v, const std::string& bw, const nlohmann::json& j) {
+  auto num = [&](const char* k) { return j.contains(k) && j[k].is_number() ? j[k].get<double>() : std::nan(""); };
+  std::fprintf(stderr, "%-13s %9s %4.0f/%-2zu %10.2f %9.1f %9.1f %7.0f %8.1f\n", v.c_str(),
+               std::atof(bw.c_str()) <= 0 ? "unlim" : bw.c_str(), num("agents_merged"),
+               j["agents"].get<std::size_t>(), num("ate_rmse_m") * 100, num("bytes_total") / 1000.0,
+               num("kBps_mean"), num("loops_accepted"), num("wall_s"));
+}
+
+int writeJson(const nlohmann::json& out, const std::string& path) {
+  if (path.empty()) {
+    std::cout << out.dump(2) << "\n";
+    return 0;
+  }
+  std::ofstream f(path);
+  f << out.dump(2) << "\n";
+  if (!f) return std::fprintf(stderr, "cannot write %s\n", path.c_str()), 1;
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -96,6 +202,9 @@ int main(int argc, char** argv) {
   std::vector<std::string> variants =
       split("hermes,fixed_k100,raw,csa_off,covisibility,false_candidates");
   std::string json_out;
+  std::vector<std::string> swarm;
+  std::string swarm_bw = "50";
+  bool variants_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -118,6 +227,11 @@ int main(int argc, char** argv) {
       bandwidths = split(next());
     } else if (a == "--variants") {
       variants = split(next());
+      variants_given = true;
+    } else if (a == "--swarm") {
+      swarm = split(next());
+    } else if (a == "--swarm-bandwidth") {
+      swarm_bw = next();
     } else if (a == "--json") {
       json_out = next();
     } else {
@@ -135,27 +249,36 @@ int main(int argc, char** argv) {
       return 2;
     }
 
-  // Rendered data (cached).
-  char key[64];
-  std::snprintf(key, sizeof key, "d%g_r%g", duration, rate);
-  const fs::path data = fs::path(cache) / key;
-  if (!fs::exists(data / "done")) {
-    std::fprintf(stderr, "[bench system] rendering 3 robots x %g s at %g Hz into %s\n", duration,
-                 rate, data.c_str());
-    fs::remove_all(data);
-    const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path();
-    std::string cmd = (bin / "hermes_sim").string();
-    for (const char* s : kSeqs)
-      cmd += std::string(" --trajectory ") + HERMES_SOURCE_DIR + "/config/trajectories/" + s + ".txt";
-    char tail[160];
-    std::snprintf(tail, sizeof tail, " --duration %g --rate %g --seed 1 >/dev/null 2>&1", duration, rate);
-    cmd += " --out " + data.string() + tail;
-    if (std::system(cmd.c_str()) != 0) {
-      std::fprintf(stderr, "hermes_bench_system: rendering failed (%s)\n", cmd.c_str());
-      return 1;
-    }
-    std::ofstream(data / "done") << "ok\n";
+  if (!swarm.empty()) {
+    if (!variants_given) variants = {"hermes", "raw"};
+    for (const std::string& n : swarm)
+      if (std::atoi(n.c_str()) < 1 || std::atoi(n.c_str()) > 12)
+        return std::fprintf(stderr, "hermes_bench_system: swarm size '%s' not in 1..12\n", n.c_str()), 2;
   }
+  if (!swarm.empty()) {
+    nlohmann::json runs = nlohmann::json::array();
+    std::fprintf(stderr, "%-13s %9s %7s %10s %9s %9s %7s %8s\n", "variant", "Mbit/s", "merged",
+                 "ATE [cm]", "kB", "kB/s", "loops", "wall [s]");
+    for (const std::string& n : swarm) {
+      auto robots = swarmRobots(cache, duration, rate, std::atoi(n.c_str()));
+      if (!robots.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", robots.error().c_str()), 1;
+      for (const std::string& v : variants) {
+        auto j = runVariant(v, swarm_bw, *robots);
+        if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
+        printRow(v, swarm_bw, *j);
+        runs.push_back(*j);
+      }
+    }
+    return writeJson({{"bench", "system_swarm"}, {"duration_s", duration}, {"rate_hz", rate},
+                      {"bandwidth_mbitps", std::atof(swarm_bw.c_str())}, {"runs", runs}},
+                     json_out);
+  }
+
+  // Rendered data (cached).
+  auto data = renderCached(cache, duration, rate, 0);
+  if (!data.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", data.error().c_str()), 1;
+  Robots robots;
+  for (const char* seq : kSeqs) robots.push_back({seq, *data / seq});
 
   // The two lowest bandwidths for the ablations.
   std::vector<std::string> low = bandwidths;
@@ -173,56 +296,16 @@ int main(int argc, char** argv) {
     for (const std::string& bw : bandwidths) {
       if (ablation && std::find(low.begin(), low.end(), bw) == low.end()) continue;
       if (v == "false_candidates" && std::atof(bw.c_str()) > 0) continue;
-      std::vector<std::string> sets = variantSets(v);
-      sets.push_back("link.bandwidth_mbitps=" + bw);
-      sets.push_back("uplink.buffer.fsync=false");
-      auto config = agent::loadRunConfig("", sets);
-      if (!config.ok()) return std::fprintf(stderr, "%s\n", config.error().c_str()), 1;
-      auto params = system::readSystemParams(*config);
-      if (!params.ok()) return std::fprintf(stderr, "%s\n", params.error().c_str()), 1;
-      std::vector<system::AgentSource> sources;
-      for (const char* s : kSeqs) {
-        auto ds = Dataset::open((data / s).string(), params->run.dataset);
-        if (!ds.ok()) return std::fprintf(stderr, "%s\n", ds.error().c_str()), 1;
-        sources.push_back({s, std::move(*ds), 0});
-      }
-      const std::string spool = (fs::temp_directory_path() / "hermes_bench_system_spool").string();
-      auto run = system::OfflineRun::create(*params, std::move(sources), spool, HERMES_SOURCE_DIR);
-      if (!run.ok()) return std::fprintf(stderr, "%s\n", run.error().c_str()), 1;
-      std::size_t injected = 0;
-      if (v == "false_candidates") injectFalseCandidates(**run, 0.2, &injected);
-      const auto t0 = std::chrono::steady_clock::now();
-      if (Status s = (*run)->run(); !s) return std::fprintf(stderr, "%s\n", s.error().c_str()), 1;
-      const double wall =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      const system::RunResults r = system::evaluateRun(**run);
-      nlohmann::json j = system::resultsJson(r);
-      j["variant"] = v;
-      j["bandwidth_mbitps"] = std::atof(bw.c_str());
-      j["wall_s"] = wall;
-      j["lost_messages"] = (*run)->lostMessages();
-      if (v == "false_candidates") j["injected_false_candidates"] = injected;
-      runs.push_back(j);
-      const RunMetrics& m = r.metrics;
-      std::fprintf(stderr, "%-13s %9s %4lld/3 %10.2f %9.1f %9.1f %7lld %8.1f\n", v.c_str(),
-                   std::atof(bw.c_str()) <= 0 ? "unlim" : bw.c_str(),
-                   static_cast<long long>(m.agents_merged.value_or(0)),
-                   m.ate_rmse_m ? *m.ate_rmse_m * 100 : std::nan(""),
-                   double(m.bytes_total.value_or(0)) / 1000.0, m.kBps_mean.value_or(0),
-                   static_cast<long long>(m.loops_accepted.value_or(0)), wall);
+      auto j = runVariant(v, bw, robots);
+      if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
+      printRow(v, bw, *j);
+      runs.push_back(*j);
     }
   }
-  nlohmann::json out = {{"bench", "system"},
-                        {"data", data.string()},
-                        {"duration_s", duration},
-                        {"rate_hz", rate},
-                        {"runs", runs}};
-  if (json_out.empty()) {
-    std::cout << out.dump(2) << "\n";
-  } else {
-    std::ofstream f(json_out);
-    f << out.dump(2) << "\n";
-    if (!f) return std::fprintf(stderr, "cannot write %s\n", json_out.c_str()), 1;
-  }
-  return 0;
+  return writeJson({{"bench", "system"},
+                    {"data", data->string()},
+                    {"duration_s", duration},
+                    {"rate_hz", rate},
+                    {"runs", runs}},
+                   json_out);
 }

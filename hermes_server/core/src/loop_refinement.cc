@@ -13,92 +13,78 @@ namespace detail {
 
 namespace {
 
-/// Pixel residual of a point (query reference frame) seen by a query camera.
-struct QueryReprojection {
-  QueryReprojection(const SE3& T_refQ_C, const Vec3& bearing, double focal)
-      : T_C_ref(T_refQ_C.inverse()), obs(bearing.head<2>() / bearing.z()), f(focal) {}
+template <typename T>
+using V3 = Eigen::Matrix<T, 3, 1>;
+
+/// Pixel residual of a point in a camera frame against the observed bearing.
+struct Pixel {
+  static constexpr int kDim = 2;
+  Pixel(const Vec3& bearing, double focal) : obs(bearing.head<2>() / bearing.z()), f(focal) {}
   template <typename T>
-  bool operator()(const T* p, T* r) const {
-    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
-    const Eigen::Matrix<T, 3, 1> pc = T_C_ref.rotation().cast<T>() * P + T_C_ref.translation().cast<T>();
+  bool operator()(const V3<T>& pc, T* r) const {
     if (pc.z() <= T(1e-9)) return false;
     r[0] = T(f) * (pc.x() / pc.z() - T(obs.x()));
     r[1] = T(f) * (pc.y() / pc.z() - T(obs.y()));
     return true;
   }
-  SE3 T_C_ref;
   Vec2 obs;
   double f;
 };
 
-/// Pixel residual of the same point seen by a candidate camera; depends on the
-/// pose T_refQ_refC = (q [x y z w], t).
-struct CandidateReprojection {
-  CandidateReprojection(const SE3& T_refC_C, const Vec3& bearing, double focal)
-      : T_C_ref(T_refC_C.inverse()), obs(bearing.head<2>() / bearing.z()), f(focal) {}
+/// Inverse-depth residual against a keypoint's measured depth, in disparity
+/// pixels: fb * (1/z_pred - 1/z_obs).
+struct InverseDepth {
+  static constexpr int kDim = 1;
+  InverseDepth(double depth, double focal_baseline) : inv_z(1.0 / depth), fb(focal_baseline) {}
   template <typename T>
-  bool operator()(const T* q, const T* t, const T* p, T* r) const {
-    const Eigen::Quaternion<T> Q(q[3], q[0], q[1], q[2]);
-    const Eigen::Matrix<T, 3, 1> tt(t[0], t[1], t[2]);
-    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
-    const Eigen::Matrix<T, 3, 1> p_refC = Q.conjugate() * (P - tt);
-    const Eigen::Matrix<T, 3, 1> pc =
-        T_C_ref.rotation().cast<T>() * p_refC + T_C_ref.translation().cast<T>();
+  bool operator()(const V3<T>& pc, T* r) const {
     if (pc.z() <= T(1e-9)) return false;
-    r[0] = T(f) * (pc.x() / pc.z() - T(obs.x()));
-    r[1] = T(f) * (pc.y() / pc.z() - T(obs.y()));
+    r[0] = T(fb) * (T(1) / pc.z() - T(inv_z));
     return true;
   }
-  SE3 T_C_ref;
-  Vec2 obs;
-  double f;
+  double inv_z;
+  double fb;
 };
 
-/// Inverse-depth residual of a point (query reference frame) against the depth a
-/// query keypoint measured, in disparity pixels: fb * (1/z_pred - 1/z_obs).
-struct QueryDepth {
-  QueryDepth(const SE3& T_refQ_C, double depth, double fb)
-      : T_C_ref(T_refQ_C.inverse()), inv_z(1.0 / depth), fb(fb) {}
+/// A measurement `Model` of a point (query reference frame) by a query camera.
+template <typename Model>
+struct InQuery {
+  InQuery(const SE3& T_refQ_C, Model model) : T_C_ref(T_refQ_C.inverse()), m(model) {}
   template <typename T>
   bool operator()(const T* p, T* r) const {
-    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
-    const T z = (T_C_ref.rotation().cast<T>() * P + T_C_ref.translation().cast<T>()).z();
-    if (z <= T(1e-9)) return false;
-    r[0] = T(fb) * (T(1) / z - T(inv_z));
-    return true;
+    const V3<T> P(p[0], p[1], p[2]);
+    return m(V3<T>(T_C_ref.rotation().cast<T>() * P + T_C_ref.translation().cast<T>()), r);
+  }
+  ceres::CostFunction* cost() const {
+    return new ceres::AutoDiffCostFunction<InQuery, Model::kDim, 3>(new InQuery(*this));
   }
   SE3 T_C_ref;
-  double inv_z;
-  double fb;
+  Model m;
 };
 
-/// The same for a candidate keypoint's depth; depends on the pose like
-/// CandidateReprojection.
-struct CandidateDepth {
-  CandidateDepth(const SE3& T_refC_C, double depth, double fb)
-      : T_C_ref(T_refC_C.inverse()), inv_z(1.0 / depth), fb(fb) {}
+/// The same by a candidate camera; depends on the pose T_refQ_refC = (q [x y z w], t).
+template <typename Model>
+struct InCandidate {
+  InCandidate(const SE3& T_refC_C, Model model) : T_C_ref(T_refC_C.inverse()), m(model) {}
   template <typename T>
   bool operator()(const T* q, const T* t, const T* p, T* r) const {
     const Eigen::Quaternion<T> Q(q[3], q[0], q[1], q[2]);
-    const Eigen::Matrix<T, 3, 1> tt(t[0], t[1], t[2]);
-    const Eigen::Matrix<T, 3, 1> P(p[0], p[1], p[2]);
-    const Eigen::Matrix<T, 3, 1> p_refC = Q.conjugate() * (P - tt);
-    const T z = (T_C_ref.rotation().cast<T>() * p_refC + T_C_ref.translation().cast<T>()).z();
-    if (z <= T(1e-9)) return false;
-    r[0] = T(fb) * (T(1) / z - T(inv_z));
-    return true;
+    const V3<T> p_refC = Q.conjugate() * (V3<T>(p[0], p[1], p[2]) - V3<T>(t[0], t[1], t[2]));
+    return m(V3<T>(T_C_ref.rotation().cast<T>() * p_refC + T_C_ref.translation().cast<T>()), r);
+  }
+  ceres::CostFunction* cost() const {
+    return new ceres::AutoDiffCostFunction<InCandidate, Model::kDim, 4, 3, 3>(new InCandidate(*this));
   }
   SE3 T_C_ref;
-  double inv_z;
-  double fb;
+  Model m;
 };
 
 /// The residual terms of one correspondence; depth terms only where measured.
 struct Terms {
-  QueryReprojection rq;
-  CandidateReprojection rc;
-  std::optional<QueryDepth> dq;
-  std::optional<CandidateDepth> dc;
+  InQuery<Pixel> rq;
+  InCandidate<Pixel> rc;
+  std::optional<InQuery<InverseDepth>> dq;
+  std::optional<InCandidate<InverseDepth>> dc;
 };
 
 /// Midpoint triangulation in the query reference frame; false when parallel or
@@ -167,10 +153,10 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
   for (int i : ids) {
     const SE3& Tq = corr.T_refQ_Cq[corr.cam_q[i]];
     const SE3& Tc = corr.T_refC_Cc[corr.cam_c[i]];
-    Terms c{QueryReprojection(Tq, corr.bearings_q[i], f),
-            CandidateReprojection(Tc, corr.bearings_c[i], f), std::nullopt, std::nullopt};
-    if (fb > 0 && corr.depthQ(i) > 0) c.dq.emplace(Tq, corr.depthQ(i), fb);
-    if (fb > 0 && corr.depthC(i) > 0) c.dc.emplace(Tc, corr.depthC(i), fb);
+    Terms c{InQuery<Pixel>(Tq, Pixel(corr.bearings_q[i], f)),
+            InCandidate<Pixel>(Tc, Pixel(corr.bearings_c[i], f)), std::nullopt, std::nullopt};
+    if (fb > 0 && corr.depthQ(i) > 0) c.dq.emplace(Tq, InverseDepth(corr.depthQ(i), fb));
+    if (fb > 0 && corr.depthC(i) > 0) c.dc.emplace(Tc, InverseDepth(corr.depthC(i), fb));
     terms.push_back(c);
   }
 
@@ -183,22 +169,12 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
     const double huber = params.ransac_threshold_px;
     for (std::size_t k = 0; k < ids.size(); ++k) {
       const Terms& c = terms[k];
-      problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<QueryReprojection, 2, 3>(new QueryReprojection(c.rq)),
-          new ceres::HuberLoss(huber), points[k].data());
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<CandidateReprojection, 2, 4, 3, 3>(
-                                   new CandidateReprojection(c.rc)),
-                               new ceres::HuberLoss(huber), q.data(), t.data(), points[k].data());
-      if (c.dq) {
-        problem.AddResidualBlock(
-            new ceres::AutoDiffCostFunction<QueryDepth, 1, 3>(new QueryDepth(*c.dq)),
-            new ceres::HuberLoss(huber), points[k].data());
-      }
-      if (c.dc) {
-        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<CandidateDepth, 1, 4, 3, 3>(
-                                     new CandidateDepth(*c.dc)),
-                                 new ceres::HuberLoss(huber), q.data(), t.data(), points[k].data());
-      }
+      double* pk = points[k].data();
+      problem.AddResidualBlock(c.rq.cost(), new ceres::HuberLoss(huber), pk);
+      problem.AddResidualBlock(c.rc.cost(), new ceres::HuberLoss(huber), q.data(), t.data(), pk);
+      if (c.dq) problem.AddResidualBlock(c.dq->cost(), new ceres::HuberLoss(huber), pk);
+      if (c.dc)
+        problem.AddResidualBlock(c.dc->cost(), new ceres::HuberLoss(huber), q.data(), t.data(), pk);
     }
     ceres::Solver::Options opt;
     opt.linear_solver_type = ceres::DENSE_SCHUR;
