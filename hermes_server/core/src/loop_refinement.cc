@@ -92,18 +92,23 @@ struct Terms {
 bool triangulate(const GeneralizedCorrespondences& corr, int i, const SE3& T, Vec3* p) {
   const SE3& Tq = corr.T_refQ_Cq[corr.cam_q[i]];
   const SE3 Tc = T * corr.T_refC_Cc[corr.cam_c[i]];
-  // A measured depth fixes the point better than a short-baseline intersection.
+  // A measured depth fixes the point better than a short-baseline intersection;
+  // the point must lie in front of both cameras (else the match is an outlier
+  // and would make every residual evaluation of the refinement fail).
+  auto inFront = [&](const Vec3& x) {
+    return (Tq.inverse() * x).z() > 1e-6 && (Tc.inverse() * x).z() > 1e-6;
+  };
   if (corr.depthQ(i) > 0) {
     const Vec3& b = corr.bearings_q[i];
     if (b.z() <= 1e-9) return false;
     *p = Tq * (b * (corr.depthQ(i) / b.z()));
-    return true;
+    return inFront(*p);
   }
   if (corr.depthC(i) > 0) {
     const Vec3& b = corr.bearings_c[i];
     if (b.z() <= 1e-9) return false;
     *p = Tc * (b * (corr.depthC(i) / b.z()));
-    return true;
+    return inFront(*p);
   }
   const Vec3 c1 = Tq.translation(), d1 = Tq.quat() * corr.bearings_q[i];
   const Vec3 c2 = Tc.translation(), d2 = Tc.quat() * corr.bearings_c[i];
