@@ -121,6 +121,8 @@ class ServerNode {
                                           server_->map().landmarkPositionsWorld(), true);
         !s)
       ROS_ERROR("hermes_server: %s", s.error().c_str());
+    if (auto s = server_->map().save(output_dir_ + "/global_map.hgm"); !s)
+      ROS_ERROR("hermes_server: %s", s.error().c_str());
     if (auto s = hermes::writeMetricsJson(output_dir_ + "/metrics.json",
                                           hermes::server::serverMetrics(*server_));
         !s)

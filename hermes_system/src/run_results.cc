@@ -253,6 +253,7 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                            });
       !s)
     return s;
+  if (Status s = run.server().map().save((out / "global_map.hgm").string()); !s) return s;
   return server::writePly((out / "global_map.ply").string(),
                           run.server().map().landmarkPositionsWorld(), /*binary=*/true);
 }

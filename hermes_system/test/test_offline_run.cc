@@ -82,7 +82,7 @@ TEST(OfflineRun, ThreeRobotsMergeUnlimited) {
   fs::remove_all(out);
   ASSERT_TRUE(system::writeRunResults(*run, r, out));
   for (const char* f : {"metrics.json", "bandwidth.csv", "uplink_estimate.csv", "ate_over_time.csv",
-                        "loops.csv", "global_map.ply", "trajectories/MH_01_easy_raw.tum",
+                        "loops.csv", "global_map.ply", "global_map.hgm", "trajectories/MH_01_easy_raw.tum",
                         "trajectories/MH_02_easy_merged.tum"})
     EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
   auto back = readMetricsJson(out + "/metrics.json");
