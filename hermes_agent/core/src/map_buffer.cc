@@ -240,7 +240,9 @@ Status MapBuffer::compact() {
 
 BufferedSubmap* MapBuffer::nextToSend(double now) {
   for (auto& [key, s] : pending_)
-    if (s.last_sent < 0 || now - s.last_sent >= p_.resend_timeout_s) return &s;
+    if (s.last_sent < 0 ||
+        now - s.last_sent >= p_.resend_timeout_s * double(1 << std::clamp(s.sends - 1, 0, 3)))
+      return &s;
   return nullptr;
 }
 

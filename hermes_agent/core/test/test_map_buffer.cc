@@ -47,6 +47,19 @@ TEST(MapBuffer, SurvivesRestartAndFreesAcked) {
   EXPECT_EQ(b->nextToSend(4.9), nullptr);
   ASSERT_NE(b->nextToSend(5.0), nullptr);  // resend timeout
   EXPECT_EQ(b->nextToSend(5.0)->seq, 0u);
+  // Each resend doubles the wait (at most x8): 5, then 10, 20, 40, 40 s.
+  double t = 5.0;
+  for (double wait : {10.0, 20.0, 40.0, 40.0}) {
+    b->markSent(0, 0, t);
+    b->markSent(0, 2, t);
+    b->markSent(0, 4, t);
+    EXPECT_EQ(b->nextToSend(t + wait - 0.1), nullptr) << "wait " << wait;
+    ASSERT_NE(b->nextToSend(t + wait), nullptr) << "wait " << wait;
+    t += wait;
+  }
+  // A reconnect resends at once.
+  b->resetSendTimes();
+  EXPECT_NE(b->nextToSend(t), nullptr);
 }
 
 TEST(MapBuffer, TornTailIsCutAndReported) {

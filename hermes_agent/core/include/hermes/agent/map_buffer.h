@@ -28,7 +28,9 @@ struct MapBufferParams {
   std::string dir;                       ///< spool directory (created if missing)
   double max_mbytes = 256.0;             ///< [MB] cap on pending (unacked) bytes
   bool fsync = true;                     ///< fsync every append
-  double resend_timeout_s = 10.0;        ///< [s] resend an unacked submap after this
+  double resend_timeout_s = 10.0;        ///< [s] resend an unacked submap after this,
+                                         ///< doubled per resend of it (at most x8): a
+                                         ///< link far slower than believed is not flooded
 
   Status read(const Config& c);
   Status validate() const;
