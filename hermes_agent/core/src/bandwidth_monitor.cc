@@ -10,7 +10,8 @@ Status BandwidthMonitorParams::read(const Config& c) {
                             std::pair{"uplink.monitor.decay_tau_s", &decay_tau_s},
                             std::pair{"uplink.monitor.outage_timeout_s", &outage_timeout_s},
                             std::pair{"uplink.monitor.probe_factor", &probe_factor},
-                            std::pair{"uplink.monitor.initial_bps", &initial_bps}}) {
+                            std::pair{"uplink.monitor.initial_bps", &initial_bps},
+                            std::pair{"uplink.monitor.latency_s", &latency_s}}) {
     if (Status s = c.get(key, field); !s) return s;
   }
   if (Status s = c.get("uplink.monitor.span_messages", &span_messages); !s) return s;
@@ -24,6 +25,7 @@ Status BandwidthMonitorParams::validate() const {
   if (!(probe_factor >= 1.0)) return Error{"uplink.monitor.probe_factor must be >= 1"};
   if (!(initial_bps > 0)) return Error{"uplink.monitor.initial_bps must be > 0"};
   if (span_messages < 1) return Error{"uplink.monitor.span_messages must be >= 1"};
+  if (!(latency_s >= 0)) return Error{"uplink.monitor.latency_s must be >= 0"};
   return Status::Ok();
 }
 
@@ -34,6 +36,7 @@ void BandwidthMonitorParams::write(ConfigWriter& w) const {
   w.set("uplink.monitor.probe_factor", probe_factor);
   w.set("uplink.monitor.initial_bps", initial_bps);
   w.set("uplink.monitor.span_messages", span_messages);
+  w.set("uplink.monitor.latency_s", latency_s);
 }
 
 BandwidthMonitor::BandwidthMonitor(BandwidthMonitorParams p) : p_(p) {
@@ -82,21 +85,25 @@ std::size_t BandwidthMonitor::outstandingBytes() const {
   return n;
 }
 
-bool BandwidthMonitor::outage(double t) const {
-  if (outstanding_.empty()) return false;
-  // The next ack is due one transfer time of the oldest outstanding message
-  // after the link last made progress; silence beyond that + T_out is an outage.
+const BandwidthMonitor::Outstanding* BandwidthMonitor::oldestOutstanding() const {
   const Outstanding* oldest = nullptr;
   for (const auto& [id, o] : outstanding_)
     if (!oldest || o.sent < oldest->sent) oldest = &o;
+  return oldest;
+}
+
+bool BandwidthMonitor::outage(double t) const {
+  const Outstanding* oldest = oldestOutstanding();
+  if (!oldest) return false;
+  // The next ack is due one transfer time of the oldest outstanding message
+  // after the link last made progress; silence beyond that + T_out is an outage.
   const double since = std::max(oldest->sent, last_ack_);
   const double rate = std::max(last_sample_bps_, p_.initial_bps * 0.01);
   const double expected = static_cast<double>(oldest->bytes) / rate;
   return t - since > p_.outage_timeout_s + expected;
 }
 
-double BandwidthMonitor::estimate(double t) const {
-  if (outage(t)) return 0.0;
+double BandwidthMonitor::sampledRate(double t) const {
   if (sample_count_ == 0) return p_.initial_bps;
   double best = 0;
   for (const auto& s : samples_)
@@ -105,6 +112,22 @@ double BandwidthMonitor::estimate(double t) const {
   // No sample in the window: decay the last known rate.
   const double silent = t - last_sample_t_ - p_.window_s;
   return last_sample_bps_ * std::exp(-std::max(0.0, silent) / p_.decay_tau_s);
+}
+
+double BandwidthMonitor::estimate(double t) const {
+  if (outage(t)) return 0.0;
+  double rate = sampledRate(t);
+  // The oldest unacknowledged message has been in transfer since max(sent,
+  // last ack); once clearly overdue at `rate` (twice its transfer time plus the
+  // ack latency: queueing alone can delay it past once), the link cannot
+  // be carrying more than its bytes over that time.
+  if (const Outstanding* oldest = oldestOutstanding(); oldest && rate > 0) {
+    const double since = std::max(oldest->sent, last_ack_);
+    const double bytes = static_cast<double>(oldest->bytes);
+    const double elapsed = t - since;
+    if (elapsed > 2.0 * bytes / rate + p_.latency_s) rate = std::min(rate, bytes / elapsed);
+  }
+  return rate;
 }
 
 double BandwidthMonitor::planningRate(double t) const {

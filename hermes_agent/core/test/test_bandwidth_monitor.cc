@@ -31,6 +31,24 @@ TEST(BandwidthMonitor, DetectsOutageAndRecovers) {
   EXPECT_NEAR(estimateAt(curve, 115.0), 10.0, 2.0);
 }
 
+// A link far slower than the initial guess: the first message is overdue long
+// before its ack, and the estimate falls to bytes / time in transfer.
+TEST(BandwidthMonitor, OverdueMessageBoundsTheEstimate) {
+  BandwidthMonitorParams p;
+  p.initial_bps = 125000;
+  BandwidthMonitor m(p);
+  m.onSend(1, 80000, 0.0);
+  EXPECT_DOUBLE_EQ(m.estimate(0.5), 125000);  // not overdue yet (2 x 0.64 s + latency)
+  EXPECT_NEAR(m.estimate(5.0), 16000, 1e-6);  // at most 80 kB in 5 s
+  EXPECT_NEAR(m.estimate(20.0), 4000, 1e-6);
+  EXPECT_FALSE(m.outage(20.0));  // the rate floor keeps a slow transfer from an outage
+  m.onAck(1, 40.0);              // 2 kB/s in truth
+  EXPECT_NEAR(m.estimate(40.0), 2000, 1e-6);
+  // A message not yet overdue (its transfer time + latency) does not cap it.
+  m.onSend(2, 1000, 40.0);
+  EXPECT_NEAR(m.estimate(40.3), 2000, 1e-6);
+}
+
 TEST(BandwidthMonitor, ParamsValidate) {
   BandwidthMonitorParams p;
   p.probe_factor = 0.5;

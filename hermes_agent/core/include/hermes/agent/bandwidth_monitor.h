@@ -10,6 +10,10 @@
 // outage when nothing is acknowledged for `outage_timeout_s` beyond the time the
 // outstanding bytes should take → B̂ = 0. After a window whose budget was fully
 // delivered in time, the next budget probes `probe_factor` higher.
+// An overdue message bounds B̂ from above: a message of b bytes whose transfer
+// began τ seconds ago and is still unacknowledged (τ > 2 × expected + latency_s)
+// says the link carries less than b / τ -- so a link far slower than believed
+// (the first windows, planned on the initial guess) is seen before any ack.
 // It never reads a configured link rate.
 #pragma once
 
@@ -28,6 +32,7 @@ struct BandwidthMonitorParams {
   double probe_factor = 1.25;     ///< budget multiplier after a fully delivered window
   double initial_bps = 125000.0;  ///< [byte/s] guess before any sample (1 Mbit/s)
   int span_messages = 3;          ///< longest run of back-to-back messages a sample spans
+  double latency_s = 0.5;         ///< [s] ack latency allowed before an overdue message bounds B̂
 
   Status read(const Config& c);
   Status validate() const;
@@ -66,6 +71,9 @@ class BandwidthMonitor {
   struct Delivered {  ///< a message of the current busy period
     double start, ack, bytes;
   };
+  const Outstanding* oldestOutstanding() const;
+  /// Max-filtered / decayed rate from the samples alone (no outage, no bound).
+  double sampledRate(double t) const;
   BandwidthMonitorParams p_;
   std::map<std::uint64_t, Outstanding> outstanding_;
   std::deque<Sample> samples_;
