@@ -11,7 +11,8 @@ namespace distill {
 
 double budgetBytes(const DistillParams& params, const CoordinatorInput& in) {
   const double gain = in.probe ? 1.0 + params.probe_gain : 1.0;
-  return params.eta * std::max(0.0, in.bandwidth_Bps) * params.window_s * gain - in.backlog_bytes;
+  const double period = in.period_s > 0 ? in.period_s : params.window_s;
+  return params.eta * std::max(0.0, in.bandwidth_Bps) * period * gain - in.backlog_bytes;
 }
 
 ByteModel::ByteModel(const DistillParams& p)

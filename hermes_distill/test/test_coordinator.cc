@@ -24,6 +24,11 @@ TEST(Coordinator, BudgetFollowsEq17AndProbes) {
   EXPECT_NEAR(budgetBytes(p, in), 0.8 * 10000 * 5 * 1.25 - 3000, 1e-9);
   in.bandwidth_Bps = 0;
   EXPECT_LT(budgetBytes(p, in), 0);
+  in.bandwidth_Bps = 10000;
+  in.backlog_bytes = 0;
+  in.probe = false;
+  in.period_s = 15;  // a window carrying two deferred ones
+  EXPECT_NEAR(budgetBytes(p, in), 0.8 * 10000 * 15, 1e-9);
 }
 
 TEST(Coordinator, ByteModelRefitRecoversTheEncoderCoefficients) {

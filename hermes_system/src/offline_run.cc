@@ -133,7 +133,20 @@ Status OfflineRun::feedDueFrames(double t) {
                    frame.error()};
     auto r = next->pipeline->feed(*frame);
     if (!r.ok()) return Error{"frame " + std::to_string(next->next) + ": " + r.error()};
-    if (++next->next == next->frames) next->pipeline->flushWindow();  // the last, partial window
+    if (++next->next == next->frames) {
+      next->pipeline->flushWindow();  // the last, partial window
+      next->next_retry = t + params_.run.agent.tracker.window.period_s;
+    }
+  }
+}
+
+void OfflineRun::retryCarriedWindows(double t) {
+  // After its last frame an agent makes no new windows; one it had to defer
+  // (the link too slow or busy) is tried again every window period.
+  for (OfflineAgent& a : agents_) {
+    if (a.next < a.frames || !a.pipeline->hasCarriedWindow() || t + 1e-9 < a.next_retry) continue;
+    a.pipeline->retryCarriedWindow(t);
+    a.next_retry = t + params_.run.agent.tracker.window.period_s;
   }
 }
 
@@ -180,6 +193,7 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     acknowledge(t);
     for (OfflineAgent& a : agents_) a.pipeline->pollUplink(t);
     if (Status s = feedDueFrames(t); !s) return s;
+    retryCarriedWindows(t);
     if (t + 1e-9 >= next_server_) {
       server_->process(t);
       next_server_ += c.server_period_s;
@@ -190,7 +204,10 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     }
     const bool frames_left = std::any_of(agents_.begin(), agents_.end(),
                                          [](const OfflineAgent& a) { return a.next < a.frames; });
-    const bool done = !frames_left && (backlog() == 0 || t >= end_all);
+    const bool carried = std::any_of(agents_.begin(), agents_.end(), [](const OfflineAgent& a) {
+      return a.pipeline->hasCarriedWindow();
+    });
+    const bool done = !frames_left && ((backlog() == 0 && !carried) || t >= end_all);
     if (progress && (t >= next_progress || done)) {
       ProgressInfo p;
       p.sim_time = t;

@@ -102,12 +102,16 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
   return result;
 }
 
-void AgentPipeline::windowStep(double stamp) {
+void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   if (!uplink_) {
-    runWindowStep(tracker_, *distiller_, monitor_, stamp, &windows_, &timings_);
+    if (retry_carry)
+      agent::retryCarriedWindow(tracker_, *distiller_, monitor_, stamp, &windows_, &timings_);
+    else
+      runWindowStep(tracker_, *distiller_, monitor_, stamp, &windows_, &timings_);
     return;
   }
-  const double now = uplink_clock_ ? uplink_clock_() : last_stamp_ - clock_offset_;
+  const double now = uplink_clock_ ? uplink_clock_()
+                                   : (retry_carry ? stamp : last_stamp_) - clock_offset_;
   WindowSink sink;
   sink.link_now = now;
   sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
@@ -124,8 +128,17 @@ void AgentPipeline::windowStep(double stamp) {
     }
     return s;
   };
-  runWindowStep(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
+  if (retry_carry)
+    agent::retryCarriedWindow(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
+  else
+    runWindowStep(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
   uplink_->poll(now);
+}
+
+void AgentPipeline::retryCarriedWindow(double now) {
+  if (!windows_.carry) return;
+  // The uplink clock is the stamp clock shifted by the offset (or its own clock).
+  windowStep(now + clock_offset_, /*retry_carry=*/true);
 }
 
 void AgentPipeline::flushWindow() {

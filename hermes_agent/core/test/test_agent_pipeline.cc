@@ -248,3 +248,41 @@ TEST(WindowStep, DistillsAndEncodesEveryWindowWithinBudget) {
   EXPECT_EQ(zero.windows, 0);
   EXPECT_EQ(zero.bytes, 0);
 }
+
+// After the sequence ends no new window comes: a window the uplink refused is
+// tried again by retryCarriedWindow (standing for one more period), not lost.
+TEST(WindowStep, CarriedWindowIsRetriedWithoutANewWindow) {
+  distill::SyntheticWindowParams wp;
+  auto scene = distill::makeSceneFromTum(
+      std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt", wp);
+  ASSERT_TRUE(scene.ok()) << scene.error();
+  distill::DistillParams dp;
+  dp.strategy = "greedy_logdet";
+  auto distiller =
+      distill::Distiller::create(dp, [](const Submap& s) { return encodedSizeUncompressed(s); });
+  ASSERT_TRUE(distiller.ok()) << distiller.error();
+  agent::BandwidthMonitor monitor{agent::BandwidthMonitorParams{}};
+  SyntheticWindowSource source(&*scene);
+  agent::WindowCounters counters;
+  TimingStats timings;
+  int refusals = 1;
+  std::vector<Submap> accepted;
+  agent::WindowSink sink;
+  sink.submit = [&](const Submap& s, std::vector<std::uint8_t>&&) -> Status {
+    if (refusals-- > 0) return Error{"spool full"};
+    accepted.push_back(s);
+    return Status::Ok();
+  };
+  agent::retryCarriedWindow(source, **distiller, monitor, 1.0, &counters, &timings, &sink);
+  EXPECT_EQ(timings.count("distill"), 0u) << "nothing carried: nothing to do";
+  for (int i = 0; i <= 20; ++i)  // one window, at 5 s
+    agent::runWindowStep(source, **distiller, monitor, 5.0 + 0.05 * i, &counters, &timings, &sink);
+  ASSERT_EQ(counters.refused, 1);
+  ASSERT_TRUE(counters.carry.has_value());
+  EXPECT_EQ(counters.carry_periods, 1);
+  agent::retryCarriedWindow(source, **distiller, monitor, 11.0, &counters, &timings, &sink);
+  EXPECT_FALSE(counters.carry.has_value());
+  ASSERT_EQ(accepted.size(), 1u);
+  EXPECT_EQ(counters.sent, 1);
+  EXPECT_EQ(counters.windows, 1);
+}

@@ -22,9 +22,13 @@ struct CoordinatorInput {
   double backlog_bytes = 0;   ///< bytes still unacknowledged in the buffer
   int loop_closures = 0;      ///< loops found so far (α rule)
   bool probe = false;         ///< last window's budget was fully delivered: probe higher
+  /// Time the window stands for [s]; 0 = one window period (distill.window_s). A
+  /// window carrying deferred ones stands for all their periods: the link had
+  /// that long for it (else the floor, which grows with the span, never fits).
+  double period_s = 0;
 };
 
-/// Eq. 17 budget (may be negative when the backlog exceeds what the link carries).
+/// Eq. 17 budget η B̂ Δt − backlog (may be negative when the backlog exceeds what the link carries).
 double budgetBytes(const DistillParams& params, const CoordinatorInput& in);
 
 class ByteModel {

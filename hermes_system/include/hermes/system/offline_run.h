@@ -41,6 +41,7 @@ struct OfflineAgent {
   double clock_offset = 0;           ///< dataset stamp of frame 0 (sim t = stamp - offset)
   std::optional<RobotId> robot;      ///< server robot id once a submap was accepted
   std::size_t acked = 0, lost_messages = 0;
+  double next_retry = 0;  ///< [s] after the last frame: next try of a deferred window
 };
 
 struct ProgressInfo {
@@ -86,6 +87,8 @@ class OfflineRun {
   void deliver(double t);
   void acknowledge(double t);
   void sample(double t);
+  /// Agents past their last frame try their deferred window again (one per period).
+  void retryCarriedWindows(double t);
 
   struct PendingAck {
     double time;

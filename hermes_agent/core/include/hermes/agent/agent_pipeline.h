@@ -77,6 +77,12 @@ class AgentPipeline {
   void pollUplink(double now);
   /// End of the sequence: distils and submits the open (partial) window now.
   void flushWindow();
+  /// After the end of the sequence: a window deferred or refused (link too slow,
+  /// spool full) is distilled again at uplink time `now` and submitted if it fits.
+  /// Call once per window period while draining.
+  void retryCarriedWindow(double now);
+  /// A deferred / refused window waits to be sent.
+  bool hasCarriedWindow() const { return windows_.carry.has_value(); }
   /// Loops the server reports for this agent (the coordinator's alpha rule).
   void setLoopClosures(int loops) { loop_closures_ = loops; }
   /// Null until attachUplink().
@@ -92,8 +98,9 @@ class AgentPipeline {
  private:
   AgentPipeline(const AgentPipelineParams& params, const std::string& name,
                 const AgentCamera& camera, std::unique_ptr<distill::Distiller> distiller);
-  /// The window step at tracker time `stamp` (uplink time: the last frame's).
-  void windowStep(double stamp);
+  /// The window step at tracker time `stamp` (uplink time: the last frame's;
+  /// when retrying the carried window: stamp - clock offset).
+  void windowStep(double stamp, bool retry_carry = false);
 
   AgentPipelineParams params_;
   std::string name_;

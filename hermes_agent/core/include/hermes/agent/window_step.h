@@ -35,6 +35,7 @@ struct WindowCounters {
   std::int64_t carried = 0;  ///< windows merged into a later one after deferral / refusal
   std::int64_t carry_dropped_keyframes = 0;  ///< dropped by the kMaxCarryKeyframes bound
   std::optional<Submap> carry;  ///< deferred / refused window waiting for the next
+  int carry_periods = 0;        ///< window periods the carried window stands for
 };
 
 template <typename T, typename = void>
@@ -74,7 +75,56 @@ struct WindowSink {
   std::function<Status(const Submap& submap, std::vector<std::uint8_t>&& frame)> submit;
 };
 
-/// One window step at time `stamp` [s]. Timings: "distill", "encode".
+/// Distils `window` (standing for `periods` window periods) under the budget,
+/// encodes it and hands it to the sink; a deferred or refused window becomes the
+/// carry. Timings: "distill", "encode".
+inline void distilAndSubmit(Submap window, int periods, const distill::MotionHint& motion,
+                            distill::Distiller& distiller, const BandwidthMonitor& monitor,
+                            double stamp, WindowCounters* counters, TimingStats* timings,
+                            const WindowSink* sink) {
+  distill::CoordinatorInput in;
+  in.bandwidth_Bps = monitor.planningRate(sink ? sink->link_now : stamp);
+  in.backlog_bytes = sink ? sink->backlog_bytes : 0;
+  in.loop_closures = sink ? sink->loop_closures : 0;
+  in.period_s = periods * distiller.params().window_s;
+  const auto t0 = std::chrono::steady_clock::now();
+  distill::DistillResult r = distiller.distill(window, motion, in);
+  const auto t1 = std::chrono::steady_clock::now();
+  timings->add("distill", std::chrono::duration<double, std::milli>(t1 - t0).count());
+  if (!r.report.ok) {
+    ++counters->failed;
+    return;
+  }
+  auto keep = [&] {
+    counters->carry = std::move(window);
+    counters->carry_periods = periods;
+  };
+  if (r.report.deferred) {
+    ++counters->deferred;
+    keep();
+    return;
+  }
+  auto bytes = encodeSubmap(r.submap);
+  timings->add("encode",
+               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count());
+  if (!bytes.ok()) {
+    ++counters->failed;
+    return;
+  }
+  const auto size = static_cast<std::int64_t>(bytes->size());
+  if (sink && sink->submit) {
+    if (Status s = sink->submit(r.submap, std::move(*bytes)); !s) {
+      ++counters->refused;
+      keep();
+      return;
+    }
+  }
+  ++counters->sent;
+  counters->bytes += size;
+}
+
+/// One window step at time `stamp` [s]: the tracker's due window, merged with
+/// the carried one, distilled and submitted.
 template <typename TrackerT>
 void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
                    const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
@@ -83,53 +133,22 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
     std::optional<Submap> window = tracker.takeWindowIfDue(stamp);
     if (!window) return;
     ++counters->windows;
+    int periods = 1;
     if (counters->carry) {
       auto merged = mergeWindows(std::move(*counters->carry), *window);
       counters->carry.reset();
       if (merged.ok()) {
         *window = std::move(*merged);
         ++counters->carried;
+        periods += counters->carry_periods;
       } else {
         ++counters->failed;  // camera changed: the carried window cannot join this one
       }
       counters->carry_dropped_keyframes +=
           static_cast<std::int64_t>(keepNewestKeyframes(&*window, kMaxCarryKeyframes));
     }
-    distill::CoordinatorInput in;
-    in.bandwidth_Bps = monitor.planningRate(sink ? sink->link_now : stamp);
-    in.backlog_bytes = sink ? sink->backlog_bytes : 0;
-    in.loop_closures = sink ? sink->loop_closures : 0;
-    const auto t0 = std::chrono::steady_clock::now();
-    distill::DistillResult r = distiller.distill(*window, tracker.motionHint(), in);
-    const auto t1 = std::chrono::steady_clock::now();
-    timings->add("distill", std::chrono::duration<double, std::milli>(t1 - t0).count());
-    if (!r.report.ok) {
-      ++counters->failed;
-      return;
-    }
-    if (r.report.deferred) {
-      ++counters->deferred;
-      counters->carry = std::move(*window);
-      return;
-    }
-    auto bytes = encodeSubmap(r.submap);
-    timings->add("encode", std::chrono::duration<double, std::milli>(
-                               std::chrono::steady_clock::now() - t1)
-                               .count());
-    if (!bytes.ok()) {
-      ++counters->failed;
-      return;
-    }
-    const auto size = static_cast<std::int64_t>(bytes->size());
-    if (sink && sink->submit) {
-      if (Status s = sink->submit(r.submap, std::move(*bytes)); !s) {
-        ++counters->refused;
-        counters->carry = std::move(*window);
-        return;
-      }
-    }
-    ++counters->sent;
-    counters->bytes += size;
+    distilAndSubmit(std::move(*window), periods, tracker.motionHint(), distiller, monitor, stamp,
+                    counters, timings, sink);
   } else {
     // TODO(mapping): Tracker::takeWindowIfDue(double) -> std::optional<Submap> and
     // Tracker::motionHint() are not on main yet; until they are, no window exists.
@@ -140,6 +159,21 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
     (void)counters;
     (void)timings;
     (void)sink;
+  }
+}
+
+/// When no new window comes (the sequence ended), the carried window is tried
+/// again one period later: it now stands for one more period of the link.
+template <typename TrackerT>
+void retryCarriedWindow(TrackerT& tracker, distill::Distiller& distiller,
+                        const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
+                        TimingStats* timings, const WindowSink* sink = nullptr) {
+  if constexpr (TrackerHasWindows<TrackerT>::value) {
+    if (!counters->carry) return;
+    Submap window = std::move(*counters->carry);
+    counters->carry.reset();
+    distilAndSubmit(std::move(window), counters->carry_periods + 1, tracker.motionHint(),
+                    distiller, monitor, stamp, counters, timings, sink);
   }
 }
 
