@@ -113,6 +113,7 @@ Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const Scen
   Scene s;
   s.seed = p.seed;
   s.texel_m = p.texel_m;
+  s.poor_fraction = p.poor_fraction;
   Vec3 lo = camera_positions.front(), hi = lo;
   for (const Vec3& c : camera_positions) {
     if (!c.allFinite()) return Error{"scene: non-finite camera position"};
@@ -187,6 +188,7 @@ std::string sceneToJson(const Scene& s) {
   json j;
   j["seed"] = s.seed;
   j["texel_m"] = s.texel_m;
+  j["poor_fraction"] = s.poor_fraction;
   j["face_order"] = "f = 2*axis + side (side 0 = low, 1 = high); texture u/v along axes (a+1)%3, (a+2)%3";
   j["room"] = box(s.room);
   j["objects"] = json::array();

@@ -25,6 +25,7 @@ const char* kUsage =
     "usage: hermes_sim --trajectory GT.txt [--trajectory GT2.txt ...] --out DIR\n"
     "                  [--format euroc|tum] [--start S] [--duration S] [--rate HZ] [--seed N]\n"
     "                  [--width W --height H] [--no-noise] [--png-compression 0-9]\n"
+    "                  [--poor-fraction F]\n"
     "Renders one dataset folder per trajectory (TUM file of the body/IMU pose, e.g.\n"
     "shared/data/euroc_gt/MH_01_easy.txt) under DIR/<trajectory stem>, all inside ONE\n"
     "procedural scene enclosing every trajectory; the scene is described in DIR/scene.json.\n"
@@ -34,7 +35,11 @@ const char* kUsage =
     "  tum: RGB-D 640x480 f=525 at 30 Hz mounted like EuRoC cam0: rgb/, depth/ (16-bit,\n"
     "       5000 per metre), rgb.txt, depth.txt, groundtruth.txt (CAMERA pose), camera.yaml\n"
     "--start/--duration: seconds from each trajectory's first pose (default: all of it).\n"
-    "--seed: scene and sensor seed (default 1); output is byte-identical for a seed.\n";
+    "--seed: scene and sensor seed (default 1); output is byte-identical for a seed.\n"
+    "--poor-fraction: share in [0, 1] of the wall/object panels left near-uniform\n"
+    "  (texture-poor) on the textured faces (default 0.25; one wall and about a fifth\n"
+    "  of the objects are poor regardless). Higher values give views that alternate\n"
+    "  between rich and poor texture (e.g. 0.7 for keyframe-policy ablations).\n";
 
 int usageError(const std::string& msg) {
   std::fprintf(stderr, "hermes_sim: %s (see --help)\n", msg.c_str());
@@ -52,6 +57,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> traj_paths;
   std::string out, format = "euroc";
   double start = 0, duration = -1, rate = -1, seed_d = 1, width = -1, height = -1, comp = 1;
+  double poor_fraction = render::SceneParams().poor_fraction;
   bool noise = true;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -68,7 +74,7 @@ int main(int argc, char** argv) {
       noise = false;
     } else if (a == "--trajectory" || a == "--out" || a == "--format" || a == "--start" ||
                a == "--duration" || a == "--rate" || a == "--seed" || a == "--width" ||
-               a == "--height" || a == "--png-compression") {
+               a == "--height" || a == "--png-compression" || a == "--poor-fraction") {
       if (!next(&v)) return usageError(a + " needs a value");
       if (a == "--trajectory") traj_paths.push_back(v);
       else if (a == "--out") out = v;
@@ -82,6 +88,7 @@ int main(int argc, char** argv) {
         else if (a == "--seed") seed_d = x;
         else if (a == "--width") width = x;
         else if (a == "--height") height = x;
+        else if (a == "--poor-fraction") poor_fraction = x;
         else comp = x;
       }
     } else {
@@ -101,6 +108,7 @@ int main(int argc, char** argv) {
                       width != std::floor(width) || height != std::floor(height)))
     return usageError("--width/--height must be integers in [32, 4096]");
   if (comp < 0 || comp > 9 || comp != std::floor(comp)) return usageError("--png-compression must be in 0..9");
+  if (!(poor_fraction >= 0 && poor_fraction <= 1)) return usageError("--poor-fraction must be in [0, 1]");
 
   std::vector<Trajectory> trajs;
   std::vector<std::string> stems;
@@ -136,6 +144,7 @@ int main(int argc, char** argv) {
     }
   render::SceneParams sp;
   sp.seed = static_cast<std::uint64_t>(seed_d);
+  sp.poor_fraction = poor_fraction;
   const auto t_scene = std::chrono::steady_clock::now();
   auto scene = render::buildScene(positions, sp);
   if (!scene.ok()) {

@@ -1,6 +1,7 @@
 #include "hermes/agent/local_mapper.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <unordered_map>
 
@@ -97,6 +98,16 @@ void LocalMapper::cull(std::vector<Keyframe>* kfs, Landmark* l) {
 
 LocalMappingStats LocalMapper::process(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
                                        const std::vector<float>& scales) {
+  const auto t0 = std::chrono::steady_clock::now();
+  LocalMappingStats st = cullTriangulateFuseAdjust(kfs, lms, scales);
+  st.total_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return st;
+}
+
+LocalMappingStats LocalMapper::cullTriangulateFuseAdjust(std::vector<Keyframe>* kfs,
+                                                         std::vector<Landmark>* lms,
+                                                         const std::vector<float>& scales) {
   LocalMappingStats st;
   if (kfs->empty()) return st;
   const KeyframeId newest = kfs->back().id;
@@ -177,9 +188,12 @@ LocalMappingStats LocalMapper::process(std::vector<Keyframe>* kfs, std::vector<L
   for (bool f : pb.pose_fixed) st.fixed_keyframes += f;
   st.free_keyframes = int(pb.T_C_W.size()) - st.fixed_keyframes;
   st.points = int(pb.p_W.size());
+  st.observations = int(pb.observations.size());
+  for (const BaObservation& o : pb.observations) st.residuals += o.u_right >= 0 ? 3 : 2;
   auto res = solveBundleAdjustment(&pb, params_.ba);
   if (!res.ok()) return st;  // degenerate window: keep the tracked estimates
   st.ba_ms = res->time_ms;
+  st.ba_iterations = res->iterations;
   for (std::size_t i = 0; i < pose_kf.size(); ++i)
     if (!pb.pose_fixed[i]) (*kfs)[pose_kf[i]].T_A_C = pb.T_C_W[i].inverse();
   for (std::size_t j = 0; j < point_lm.size(); ++j) (*lms)[point_lm[j]].p_A = pb.p_W[j];

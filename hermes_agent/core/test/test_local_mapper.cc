@@ -14,8 +14,16 @@ TEST(LocalMapper, BundleAdjustmentKeepsOrImprovesTrackingAccuracy) {
   without.mapping.enable_ba = false;
   Tracker a(with, test::roomK(), 0.11), b(without, test::roomK(), 0.11);
   std::vector<LandmarkId> triangulated;
+  int ba_runs = 0, ba_sizes_consistent = 0;
   auto sa = test::runRoomSequence(&a, true, 30, [&](double, const TrackResult& r) {
     for (const auto& t : r.mapping.triangulated) triangulated.push_back(t.first);
+    const LocalMappingStats& m = r.mapping;
+    if (!r.new_keyframe || m.ba_ms <= 0) return;
+    ++ba_runs;  // the problem-size counters describe the solved window
+    ba_sizes_consistent += m.points > 0 && m.free_keyframes > 0 && m.fixed_keyframes > 0 &&
+                           m.observations >= m.points && m.residuals >= 2 * m.observations &&
+                           m.residuals <= 3 * m.observations && m.ba_iterations >= 1 &&
+                           m.total_ms >= m.ba_ms;
   });
   ASSERT_GT(sa.frames, 0) << "opencv-doc photos missing";
   // Triangulated points lie on the scene's planes (world = first camera's pose · odometry).
@@ -43,6 +51,8 @@ TEST(LocalMapper, BundleAdjustmentKeepsOrImprovesTrackingAccuracy) {
   EXPECT_LT(sa.rmse, 0.01);
   EXPECT_LT(sa.rmse, sb.rmse * 1.5 + 0.001);
   EXPECT_GT(sa.mean_ba_ms, 0);
+  EXPECT_GT(ba_runs, 0);
+  EXPECT_EQ(ba_sizes_consistent, ba_runs);
 }
 
 TEST(LocalMapper, MapStaysConsistentAfterCullingAndOutlierRemoval) {

@@ -5,7 +5,15 @@
 //   every frame against the stereo landmarks of the first one (the drone sits
 //   still in this clip, so the estimated motion is also a sanity figure), and the
 //   whole stereo Tracker::feed per frame (its drift must stay near zero here).
+//   Local bundle adjustment per keyframe (time, window size): on the real clip
+//   (few keyframes: it hardly moves) and on a rendered moving sequence (the first
+//   20 s of V1_01 from hermes_sim, rendered once into the cache folder).
+// --ablation instead runs the keyframe-policy ablation (paper §IV-A): each
+//   rendered sequence tracked with keyframe.policy entropy and covisibility;
+//   keyframes, ATE, lost rate per run.
 // Usage: hermes_bench_frontend [--data DIR/mav0] [--frames N] [--json FILE]
+//                              [--cache DIR] [--no-render]
+//        hermes_bench_frontend --ablation [--sequence STEM,START,DURATION,POOR_FRACTION ...]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -14,6 +22,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -29,6 +38,7 @@
 #include "hermes/agent/pose_estimation.h"
 #include "hermes/agent/stereo_matcher.h"
 #include "hermes/agent/tracker.h"
+#include "rendered_runs.h"
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -54,6 +64,143 @@ nlohmann::json stats(std::vector<double> v) {
   j["mean"] = sum / v.size();
   j["n"] = v.size();
   return j;
+}
+
+/// Local bundle adjustment per keyframe: time and problem size of every solved window.
+nlohmann::json localBaJson(const std::vector<LocalMappingStats>& mapping) {
+  std::vector<double> ba, total, free_kf, fixed_kf, points, obs, res, iters;
+  for (const LocalMappingStats& m : mapping) {
+    total.push_back(m.total_ms);
+    if (m.ba_ms <= 0) continue;  // BA off or degenerate window
+    ba.push_back(m.ba_ms);
+    free_kf.push_back(m.free_keyframes);
+    fixed_kf.push_back(m.fixed_keyframes);
+    points.push_back(m.points);
+    obs.push_back(m.observations);
+    res.push_back(m.residuals);
+    iters.push_back(m.ba_iterations);
+  }
+  nlohmann::json j;
+  j["keyframes_mapped"] = mapping.size();
+  j["ba_ms"] = stats(ba);
+  j["local_mapping_ms"] = stats(total);
+  j["window"]["free_keyframes"] = stats(free_kf);
+  j["window"]["fixed_keyframes"] = stats(fixed_kf);
+  j["window"]["landmarks"] = stats(points);
+  j["window"]["observations"] = stats(obs);
+  j["window"]["residuals"] = stats(res);
+  j["window"]["iterations"] = stats(iters);
+  return j;
+}
+
+nlohmann::json runJson(const bench::SequenceRun& r) {
+  nlohmann::json j;
+  j["frames"] = r.frames;
+  j["keyframes"] = r.keyframes;
+  j["entropy_rule_keyframes"] = r.entropy_keyframes;
+  j["entropy_only_keyframes"] = r.entropy_only_keyframes;
+  j["landmarks"] = r.landmarks;
+  j["lost_frames"] = r.lost;
+  j["lost_rate"] = r.lostRate();
+  if (r.ate_rmse_m >= 0) {
+    j["ate_rmse_m"] = r.ate_rmse_m;
+    j["ate_poses"] = r.ate_matched;
+  } else {
+    j["ate_rmse_m"] = nullptr;
+    j["ate_error"] = r.ate_error;
+  }
+  j["tracker_feed_ms"] = stats(r.track_ms);
+  j["tracker_feed_cpu_ms"] = stats(r.track_cpu_ms);
+  j["keyframe_feed_cpu_ms"] = stats(r.keyframe_cpu_ms);
+  return j;
+}
+
+const std::string kTrajectories = std::string(HERMES_SOURCE_DIR) + "/config/trajectories";
+
+/// The rendered moving sequence of the local-BA section.
+const bench::RenderSpec kBaSequence{"V1_01_easy", 0, 20, 0.25, 1};
+
+/// Sequences of the keyframe-policy ablation: MH_01 in the default scene, and
+/// V1_01 in the default scene and with most panels near-uniform (views swing
+/// between rich and poor texture: 100..1000 ORB corners at 0.85).
+const std::vector<bench::RenderSpec> kAblationSequences = {
+    {"MH_01_easy", 0, 60, 0.25, 1},
+    {"V1_01_easy", 0, 40, 0.25, 1},
+    {"V1_01_easy", 0, 40, 0.7, 1},
+    {"V1_01_easy", 0, 40, 0.85, 1},
+};
+
+int writeJson(const nlohmann::json& j, const std::string& json_out) {
+  const std::string text = j.dump(2);
+  std::cout << text << "\n";
+  if (!json_out.empty()) {
+    std::ofstream out(json_out);
+    if (!out) {
+      std::cerr << "hermes_bench_frontend: cannot write " << json_out << "\n";
+      return 1;
+    }
+    out << text << "\n";
+  }
+  return 0;
+}
+
+/// "STEM,START,DURATION,POOR_FRACTION" (e.g. V1_01_easy,0,40,0.85) as a RenderSpec.
+Expected<bench::RenderSpec> parseSequence(const std::string& text) {
+  bench::RenderSpec s;
+  std::stringstream ss(text);
+  std::string stem, a, b, c;
+  if (!std::getline(ss, stem, ',') || !std::getline(ss, a, ',') || !std::getline(ss, b, ',') ||
+      !std::getline(ss, c) || stem.empty())
+    return Error{"--sequence wants STEM,START,DURATION,POOR_FRACTION, got '" + text + "'"};
+  try {
+    s.stem = stem;
+    s.start_s = std::stod(a);
+    s.duration_s = std::stod(b);
+    s.poor_fraction = std::stod(c);
+  } catch (const std::exception&) {
+    return Error{"--sequence: not a number in '" + text + "'"};
+  }
+  if (!(s.start_s >= 0 && s.duration_s > 0 && s.poor_fraction >= 0 && s.poor_fraction <= 1))
+    return Error{"--sequence '" + text + "': need START >= 0, DURATION > 0, POOR_FRACTION in [0, 1]"};
+  return s;
+}
+
+/// Keyframe-policy ablation over `sequences`.
+int runAblation(const std::vector<bench::RenderSpec>& sequences, const std::string& cache,
+                const std::string& json_out) {
+  nlohmann::json j;
+  j["benchmark"] = "frontend_ablation";
+  j["note"] =
+      "stereo Tracker (default TrackerParams) on rendered EuRoC-layout sequences; only "
+      "keyframe.policy differs; ATE: RMSE of the body trajectory of the tracked frames after "
+      "SE(3) alignment; lost rate: frames not tracked / frames";
+  j["runs"] = nlohmann::json::array();
+  for (const bench::RenderSpec& spec : sequences) {
+    auto dir = bench::renderCached(spec, cache, kTrajectories);
+    if (!dir.ok()) {
+      std::cerr << "hermes_bench_frontend: " << dir.error() << "\n";
+      return 1;
+    }
+    for (const char* policy : {"entropy", "covisibility"}) {
+      TrackerParams p;
+      p.keyframe.policy = policy;
+      std::fprintf(stderr, "[bench frontend] ablation: %s, policy %s\n", spec.describe().c_str(),
+                   policy);
+      auto r = bench::trackDataset(*dir, p);
+      if (!r.ok()) {
+        std::cerr << "hermes_bench_frontend: " << r.error() << "\n";
+        return 1;
+      }
+      nlohmann::json row = runJson(*r);
+      row["sequence"] = spec.describe();
+      row["poor_fraction"] = spec.poor_fraction;
+      row["policy"] = policy;
+      row["dataset"] = *dir;
+      row["local_ba_ms"] = localBaJson(r->mapping)["ba_ms"];
+      j["runs"].push_back(row);
+    }
+  }
+  return writeJson(j, json_out);
 }
 
 struct CamCalib {
@@ -101,14 +248,43 @@ int main(int argc, char** argv) {
   const char* env = std::getenv("HERMES_SHARED_DATA_DIR");
   std::string data = std::string(env ? env : "/work/shared/data") + "/euroc_V1_01_micro/mav0";
   std::string json_out;
+  std::string cache = "/tmp/hermes_bench_frontend";
+  bool render = true, ablation = false;
+  std::vector<bench::RenderSpec> sequences;
   int max_frames = 1000;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
-      std::cout << "hermes_bench_frontend [--data DIR/mav0] [--frames N] [--json FILE]\n"
-                   "Times ORB extraction (ours vs cv::ORB), CLAHE entropy, stereo matching "
-                   "and PnP+refinement on EuRoC images; prints JSON.\n";
+      std::cout
+          << "hermes_bench_frontend [--data DIR/mav0] [--frames N] [--json FILE]\n"
+             "                      [--cache DIR] [--no-render] [--ablation]\n"
+             "Times ORB extraction (ours vs cv::ORB), CLAHE entropy, stereo matching, "
+             "PnP+refinement and Tracker::feed on EuRoC images, and local bundle adjustment "
+             "per keyframe (time, window size) on them and on a rendered moving sequence "
+             "(section local_ba); prints JSON.\n"
+             "--cache DIR: where hermes_sim renders go, once each (default "
+             "/tmp/hermes_bench_frontend; one folder per trajectory/slice/seed/poor fraction)\n"
+             "--no-render: skip the rendered sequence (real images only)\n"
+             "--ablation: instead, the keyframe-policy ablation: rendered MH_01 0-60 s and "
+             "V1_01 0-40 s (hermes_sim --poor-fraction 0.25, 0.7, 0.85) tracked with "
+             "keyframe.policy entropy and covisibility; keyframes, ATE, lost rate per run "
+             "(first run renders about 2600 stereo pairs: ~10 min)\n"
+             "--sequence STEM,START,DURATION,POOR_FRACTION: ablate this slice of "
+             "config/trajectories/STEM.txt instead (repeatable), e.g. V1_01_easy,0,40,0.85\n";
       return 0;
+    } else if (a == "--cache" && i + 1 < argc) {
+      cache = argv[++i];
+    } else if (a == "--no-render") {
+      render = false;
+    } else if (a == "--ablation") {
+      ablation = true;
+    } else if (a == "--sequence" && i + 1 < argc) {
+      auto spec = parseSequence(argv[++i]);
+      if (!spec.ok()) {
+        std::cerr << "hermes_bench_frontend: " << spec.error() << "\n";
+        return 2;
+      }
+      sequences.push_back(*spec);
     } else if (a == "--data" && i + 1 < argc) {
       data = argv[++i];
     } else if (a == "--frames" && i + 1 < argc) {
@@ -120,6 +296,11 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  if (!sequences.empty() && !ablation) {
+    std::cerr << "hermes_bench_frontend: --sequence belongs to --ablation\n";
+    return 2;
+  }
+  if (ablation) return runAblation(sequences.empty() ? kAblationSequences : sequences, cache, json_out);
   auto c0 = readSensorYaml(data + "/cam0/sensor.yaml");
   auto c1 = readSensorYaml(data + "/cam1/sensor.yaml");
   if (!c0.ok() || !c1.ok()) {
@@ -171,6 +352,7 @@ int main(int argc, char** argv) {
   std::vector<double> t_ours, t_cv, t_entropy, t_stereo, t_match, t_pnp, n_ours, n_cv,
       n_stereo, n_inliers, motion_mm, motion_deg, rms_px;
   std::vector<LandmarkView> landmarks;
+  std::vector<LocalMappingStats> real_mapping;
   for (size_t f = 0; f < names.size(); ++f) {
     cv::Mat raw0 = cv::imread(data + "/cam0/data/" + names[f], cv::IMREAD_GRAYSCALE);
     cv::Mat raw1 = cv::imread(data + "/cam1/data/" + names[f], cv::IMREAD_GRAYSCALE);
@@ -229,6 +411,8 @@ int main(int argc, char** argv) {
     } else {
       track_mm.push_back(1000.0 * tr->T_W_C.translation().norm());
     }
+    if (tr.ok() && tr->new_keyframe && tracker.keyframes().size() > 1)
+      real_mapping.push_back(tr->mapping);
 
     if (f == 0) {  // the first frame's stereo points are the map (W = C of frame 0)
       for (size_t i = 0; i < fl->size(); ++i) {
@@ -298,15 +482,24 @@ int main(int argc, char** argv) {
   j["tracker"]["translation_from_start_mm"] = stats(track_mm);
   j["pose_vs_first_frame"]["note"] =
       "drone static in this clip (ground truth moves < 3 mm): these are estimation errors";
-  const std::string text = j.dump(2);
-  std::cout << text << "\n";
-  if (!json_out.empty()) {
-    std::ofstream out(json_out);
-    if (!out) {
-      std::cerr << "hermes_bench_frontend: cannot write " << json_out << "\n";
+  j["local_ba"]["real_clip"] = localBaJson(real_mapping);
+  j["local_ba"]["real_clip"]["note"] = "the drone hardly moves: few keyframes";
+  if (render) {
+    auto dir = bench::renderCached(kBaSequence, cache, kTrajectories);
+    if (!dir.ok()) {
+      std::cerr << "hermes_bench_frontend: " << dir.error() << " (--no-render skips it)\n";
       return 1;
     }
-    out << text << "\n";
+    auto run = bench::trackDataset(*dir, TrackerParams());
+    if (!run.ok()) {
+      std::cerr << "hermes_bench_frontend: " << run.error() << "\n";
+      return 1;
+    }
+    nlohmann::json r = localBaJson(run->mapping);
+    r["sequence"] = kBaSequence.describe();
+    r["dataset"] = *dir;
+    r["tracking"] = runJson(*run);
+    j["local_ba"]["rendered"] = r;
   }
-  return 0;
+  return writeJson(j, json_out);
 }

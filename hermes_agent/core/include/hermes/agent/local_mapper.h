@@ -44,8 +44,12 @@ struct LocalMapperParams {
 };
 
 struct LocalMappingStats {
-  double ba_ms = 0;
+  double ba_ms = 0;     ///< bundle adjustment (problem set-up, solve, outlier check); 0 = not run
+  double total_ms = 0;  ///< the whole process() call: culling, triangulation, fusion, BA
   int free_keyframes = 0, fixed_keyframes = 0, points = 0;
+  int observations = 0;  ///< BA residual blocks (one per keyframe observation in the window)
+  int residuals = 0;     ///< scalar BA residuals (3 per stereo/depth observation, 2 per mono)
+  int ba_iterations = 0; ///< Levenberg-Marquardt iterations of the solve
   int outliers_removed = 0, culled = 0;
   int fused = 0;  ///< duplicate landmarks merged + observations added by projection
   /// Landmarks triangulated across keyframes: (id, keypoint index in the newest keyframe).
@@ -70,6 +74,9 @@ class LocalMapper {
   const LocalMapperParams& params() const { return params_; }
 
  private:
+  LocalMappingStats cullTriangulateFuseAdjust(std::vector<Keyframe>* keyframes,
+                                              std::vector<Landmark>* landmarks,
+                                              const std::vector<float>& scales);
   void removeObservation(std::vector<Keyframe>* kfs, Landmark* l, std::size_t index);
   void cull(std::vector<Keyframe>* kfs, Landmark* l);
   void fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,

@@ -28,6 +28,7 @@ struct SceneBox {
 struct Scene {
   std::uint64_t seed = 0;
   double texel_m = 1.0 / 128.0;     ///< texture resolution [m per texel]
+  double poor_fraction = 0.25;      ///< SceneParams::poor_fraction it was built with
   SceneBox room;
   std::vector<SceneBox> objects;
   std::vector<MipTexture> textures;

@@ -1,0 +1,162 @@
+// Helpers of hermes_bench_frontend for rendered sequences: render a slice of a
+// shipped trajectory with hermes_sim once (cached under a folder named by every
+// render setting), then feed every frame of a dataset folder to a Tracker and
+// evaluate it: ATE of the body trajectory (SE(3) alignment, as hermes_run),
+// lost rate, keyframes (and how many the entropy rule designated), tracking
+// time per frame and the local-mapping statistics of every keyframe.
+#pragma once
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <unistd.h>
+
+#include "hermes/agent/dataset_feed.h"
+#include "hermes/agent/tracker.h"
+#include "hermes/core/dataset.h"
+#include "hermes/core/evaluation.h"
+
+namespace hermes::bench {
+
+/// A slice of config/trajectories/<stem>.txt rendered as EuRoC stereo.
+struct RenderSpec {
+  std::string stem;            ///< e.g. "V1_01_easy"
+  double start_s = 0;          ///< seconds after the trajectory's first pose
+  double duration_s = 20;      ///< [s]
+  double poor_fraction = 0.25; ///< hermes_sim --poor-fraction (0.25 = its default scene)
+  int seed = 1;
+
+  std::string key() const {
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "%s_s%g_d%g_pf%g_seed%d", stem.c_str(), start_s, duration_s,
+                  poor_fraction, seed);
+    return buf;
+  }
+  std::string describe() const {
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "%s %g-%g s, hermes_sim --seed %d --poor-fraction %g",
+                  stem.c_str(), start_s, start_s + duration_s, seed, poor_fraction);
+    return buf;
+  }
+};
+
+/// hermes_sim beside the running binary (both live in <build>/bin).
+inline std::string simBinary() {
+  std::error_code ec;
+  const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return (self.parent_path() / "hermes_sim").string();
+}
+
+/// Dataset folder of `spec` under `cache_root`, rendering it first when absent.
+/// Renders into a private folder that is renamed when complete, so an
+/// interrupted render is never taken for a cached one.
+inline Expected<std::string> renderCached(const RenderSpec& spec, const std::string& cache_root,
+                                          const std::string& trajectories_dir) {
+  namespace fs = std::filesystem;
+  const fs::path done = fs::path(cache_root) / spec.key();
+  const std::string dataset = (done / spec.stem).string();
+  if (fs::is_directory(done)) return dataset;
+  const std::string sim = simBinary();
+  if (!fs::exists(sim)) return Error{"hermes_sim not found at " + sim + " (build target hermes_sim)"};
+  const std::string traj = trajectories_dir + "/" + spec.stem + ".txt";
+  if (!fs::exists(traj)) return Error{"trajectory not found: " + traj};
+  std::error_code ec;
+  fs::create_directories(cache_root, ec);
+  const fs::path partial = done.string() + ".partial." + std::to_string(::getpid());
+  const std::string log = done.string() + ".log";
+  char args[512];
+  std::snprintf(args, sizeof args, " --start %g --duration %g --seed %d --poor-fraction %g",
+                spec.start_s, spec.duration_s, spec.seed, spec.poor_fraction);
+  const std::string cmd = "'" + sim + "' --trajectory '" + traj + "' --out '" + partial.string() +
+                          "'" + args + " >'" + log + "' 2>&1";
+  std::fprintf(stderr, "[bench frontend] rendering %s into %s (log %s)\n", spec.describe().c_str(),
+               done.c_str(), log.c_str());
+  if (std::system(cmd.c_str()) != 0) {
+    fs::remove_all(partial, ec);
+    return Error{"hermes_sim failed for " + spec.describe() + " (see " + log + ")"};
+  }
+  fs::rename(partial, done, ec);
+  if (ec) {  // another run finished the same render first: use that one
+    fs::remove_all(partial, ec);
+    if (!fs::is_directory(done)) return Error{"cannot move the render to " + done.string()};
+  }
+  return dataset;
+}
+
+/// Everything one tracked sequence yields.
+struct SequenceRun {
+  int frames = 0, lost = 0;  ///< lost: not tracked (lost or not yet initialised)
+  int keyframes = 0, landmarks = 0;
+  int entropy_keyframes = 0;       ///< keyframes at which the entropy rule fired
+  int entropy_only_keyframes = 0;  ///< ... and no covisibility rule did
+  double ate_rmse_m = -1;     ///< -1 when the trajectory could not be evaluated
+  std::size_t ate_matched = 0;
+  std::string ate_error;
+  std::vector<double> track_ms;            ///< Tracker::feed per frame (wall time)
+  std::vector<double> track_cpu_ms;        ///< ... process CPU time (less load-sensitive)
+  std::vector<double> keyframe_cpu_ms;     ///< ... of the feeds that inserted a keyframe
+  std::vector<LocalMappingStats> mapping;  ///< one per inserted keyframe (after the first)
+  double lostRate() const { return frames > 0 ? double(lost) / frames : 0.0; }
+};
+
+/// Feeds every frame (at most max_frames) of the dataset folder to one Tracker.
+inline Expected<SequenceRun> trackDataset(const std::string& dir, const TrackerParams& params,
+                                          int max_frames = -1) {
+  auto ds = Dataset::open(dir);
+  if (!ds.ok()) return Error{ds.error()};
+  const DatasetInfo& info = (*ds)->info();
+  Tracker tracker(params, info.K, info.baseline);
+  const SE3 T_C_B = info.T_B_C.inverse();
+  Trajectory est;
+  SequenceRun out;
+  std::size_t n = (*ds)->size();
+  if (max_frames >= 0) n = std::min<std::size_t>(n, std::size_t(max_frames));
+  for (std::size_t i = 0; i < n; ++i) {
+    auto frame = loadCameraFrame(**ds, i);
+    if (!frame.ok()) return Error{frame.error()};
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::clock_t c0 = std::clock();
+    auto r = tracker.feed(*frame);
+    const double cpu_ms = 1000.0 * double(std::clock() - c0) / CLOCKS_PER_SEC;
+    out.track_ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    out.track_cpu_ms.push_back(cpu_ms);
+    if (!r.ok()) return Error{dir + ": " + r.error()};
+    if (r->new_keyframe) out.keyframe_cpu_ms.push_back(cpu_ms);
+    ++out.frames;
+    if (r->new_keyframe) {
+      const KeyframeDecision& d = r->keyframe;
+      out.entropy_keyframes += d.by_entropy;
+      out.entropy_only_keyframes += d.by_entropy && !d.by_tracked_ratio && !d.by_max_frames;
+      if (tracker.keyframes().size() > 1) out.mapping.push_back(r->mapping);
+    }
+    if (r->status != TrackingStatus::kOk) {
+      ++out.lost;
+      continue;
+    }
+    est.push_back({frame->stamp, r->T_W_C * T_C_B});  // odometry <- body
+  }
+  out.keyframes = int(tracker.keyframes().size());
+  for (const Landmark& l : tracker.landmarks()) out.landmarks += !tracker.isLandmarkBad(l.id);
+  if (info.groundtruth.empty()) {
+    out.ate_error = "no ground truth";
+  } else if (est.size() < 3) {
+    out.ate_error = "fewer than 3 tracked frames";
+  } else {
+    auto ev = eval::evaluateTrajectory(info.groundtruth, est, eval::EvalParams(), dir);
+    if (ev.ok()) {
+      out.ate_rmse_m = ev->ate.trans_m.rmse;
+      out.ate_matched = ev->ate.trans_m.count;
+    } else {
+      out.ate_error = ev.error();
+    }
+  }
+  return out;
+}
+
+}  // namespace hermes::bench
