@@ -156,6 +156,9 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
         buildSelectionProblem(trimmed, scores, k, s_lm, model_.cLm(), model_.cObs(), params_);
     // All rounds together get the MILP time limit (each at least 10 ms).
     prob.time_limit_s = std::max(0.01, params_.milp_time_limit_s - rep.time_select_ms * 1e-3);
+    // The previous round's selection is a feasible start when K grew (same
+    // landmark budget); after a shrink it no longer fits and the MILP ignores it.
+    prob.warm_start = last_selected;
     const SelectionResult sel = selector_->select(prob);
     rep.time_select_ms += msSince(t0);
     rep.selection_status = toString(sel.status);

@@ -10,8 +10,6 @@
 #include <unordered_map>
 
 #include <CbcModel.hpp>
-#include <CoinPackedMatrix.hpp>
-#include <CoinPackedVector.hpp>
 #include <OsiClpSolverInterface.hpp>
 
 namespace hermes {
@@ -133,64 +131,93 @@ TrimResult trimKeyframes(const Submap& w, int max_keyframes, const DistillParams
     return finish(SolveStatus::kOptimal);
   }
   const std::vector<double> s = keyframeSeparation(w, params);
+  const auto groups = landmarkGroups(w);
+  // Shared landmarks of every keyframe pair, from the groups in one pass.
+  std::vector<int> shared(static_cast<std::size_t>(n * n), 0);
+  for (const auto& [set, count] : groups)
+    for (std::size_t x = 0; x < set.size(); ++x)
+      for (std::size_t y = x + 1; y < set.size(); ++y) shared[static_cast<std::size_t>(set[x] * n + set[y])] += count;
   std::vector<Arc> arcs;
   for (int a = 0; a < n; ++a)
     for (int b = a + 1; b < n; ++b)
-      if (b == a + 1 || sharedLandmarks(w, static_cast<std::size_t>(a), static_cast<std::size_t>(b)) >= params.trim_min_shared)
-        arcs.push_back({a, b});
+      if (b == a + 1 || shared[static_cast<std::size_t>(a * n + b)] >= params.trim_min_shared) arcs.push_back({a, b});
   bool relaxed = false;
   const std::vector<int> dp = dpPath(n, arcs, s, N, &relaxed);
   if (relaxed) {
     r.kept = dp;
     return finish(SolveStatus::kInfeasibleRelaxed);
   }
-  const auto groups = landmarkGroups(w);
+  // Columns: y_j (n), z_e (arcs), then one ε per coverage row that stays. Rows:
+  // Σ y <= N; flow out of v (v != last) and into v (v != first); coverage.
+  // y_first = y_last = 1, so a group seen by at most two keyframes has a linear
+  // slack ε = need − Σ y (folded into the y costs) and a group holding both ends
+  // is always covered; only groups of >= 3 keyframes keep a row.
   const int n_arc = static_cast<int>(arcs.size());
-  const int n_grp = static_cast<int>(groups.size());
-  const int ncols = n + n_arc + n_grp;
-  std::vector<double> lb(static_cast<std::size_t>(ncols), 0.0), ub(static_cast<std::size_t>(ncols), 1.0), obj(static_cast<std::size_t>(ncols), 0.0);
+  std::vector<double> obj(static_cast<std::size_t>(n + n_arc), 0.0);
   for (int j = 0; j < n; ++j) obj[static_cast<std::size_t>(j)] = -s[static_cast<std::size_t>(j)];
-  lb[0] = 1.0;
-  lb[static_cast<std::size_t>(n - 1)] = 1.0;
-  CoinPackedMatrix rows(false, 0, 0);
-  rows.setDimensions(0, ncols);
-  std::vector<double> rlb, rub;
-  const double inf = COIN_DBL_MAX;
-  {
-    CoinPackedVector row;
-    for (int j = 0; j < n; ++j) row.insert(j, 1.0);
-    rows.appendRow(row);
-    rlb.push_back(-inf);
-    rub.push_back(N);
-  }
-  for (int v = 0; v < n; ++v) {
-    CoinPackedVector out, in;
-    out.insert(v, -1.0);
-    in.insert(v, -1.0);
-    for (int e = 0; e < n_arc; ++e) {
-      if (arcs[static_cast<std::size_t>(e)].a == v) out.insert(n + e, 1.0);
-      if (arcs[static_cast<std::size_t>(e)].b == v) in.insert(n + e, 1.0);
-    }
-    if (v != n - 1) { rows.appendRow(out); rlb.push_back(0); rub.push_back(0); }
-    if (v != 0) { rows.appendRow(in); rlb.push_back(0); rub.push_back(0); }
-  }
-  int g = 0;
+  auto out_row = [&](int v) { return 1 + v; };          // v in [0, n-2]
+  auto in_row = [&](int v) { return 1 + (n - 1) + (v - 1); };  // v in [1, n-1]
+  const int n_flow_rows = 2 * (n - 1);
+  std::vector<std::vector<int>> cover_rows_of(static_cast<std::size_t>(n));
+  std::vector<double> rlb(static_cast<std::size_t>(1 + n_flow_rows), 0.0), rub(rlb);
+  rlb[0] = -COIN_DBL_MAX;
+  rub[0] = N;
+  std::vector<double> slack_cost, slack_ub;
   for (const auto& [set, count] : groups) {
     const double need = std::min<double>(2.0, static_cast<double>(set.size()));
-    const int col = n + n_arc + g;
-    obj[static_cast<std::size_t>(col)] = params.trim_lambda * count;
-    ub[static_cast<std::size_t>(col)] = need;
-    CoinPackedVector row;
-    for (int j : set) row.insert(j, 1.0);
-    row.insert(col, 1.0);
-    rows.appendRow(row);
-    rlb.push_back(need);
-    rub.push_back(inf);
-    ++g;
+    int ends = 0;
+    for (int j : set) ends += (j == 0 || j == n - 1);
+    if (ends >= need) continue;  // always covered
+    if (set.size() <= 2) {       // ε = need − Σ y: linear
+      for (int j : set) obj[static_cast<std::size_t>(j)] -= params.trim_lambda * count;
+      continue;
+    }
+    const int row = static_cast<int>(rlb.size());
+    for (int j : set)
+      if (j != 0 && j != n - 1) cover_rows_of[static_cast<std::size_t>(j)].push_back(row);
+    rlb.push_back(need - ends);
+    rub.push_back(COIN_DBL_MAX);
+    slack_cost.push_back(params.trim_lambda * count);
+    slack_ub.push_back(need - ends);
   }
+  const int n_slack = static_cast<int>(slack_cost.size());
+  const int ncols = n + n_arc + n_slack;
+  const int nrows = static_cast<int>(rlb.size());
+  std::vector<double> lb(static_cast<std::size_t>(ncols), 0.0), ub(static_cast<std::size_t>(ncols), 1.0);
+  obj.resize(static_cast<std::size_t>(ncols), 0.0);
+  lb[0] = 1.0;
+  lb[static_cast<std::size_t>(n - 1)] = 1.0;
+  std::vector<CoinBigIndex> colstart(static_cast<std::size_t>(ncols) + 1, 0);
+  std::vector<int> index;
+  std::vector<double> value;
+  auto put = [&](int row, double v) {
+    index.push_back(row);
+    value.push_back(v);
+  };
+  for (int j = 0; j < n; ++j) {
+    colstart[static_cast<std::size_t>(j)] = static_cast<CoinBigIndex>(index.size());
+    put(0, 1.0);
+    if (j != n - 1) put(out_row(j), -1.0);
+    if (j != 0) put(in_row(j), -1.0);
+    for (int row : cover_rows_of[static_cast<std::size_t>(j)]) put(row, 1.0);
+  }
+  for (int e = 0; e < n_arc; ++e) {
+    colstart[static_cast<std::size_t>(n + e)] = static_cast<CoinBigIndex>(index.size());
+    put(out_row(arcs[static_cast<std::size_t>(e)].a), 1.0);
+    put(in_row(arcs[static_cast<std::size_t>(e)].b), 1.0);
+  }
+  for (int k = 0; k < n_slack; ++k) {
+    const int c = n + n_arc + k;
+    colstart[static_cast<std::size_t>(c)] = static_cast<CoinBigIndex>(index.size());
+    put(1 + n_flow_rows + k, 1.0);
+    obj[static_cast<std::size_t>(c)] = slack_cost[static_cast<std::size_t>(k)];
+    ub[static_cast<std::size_t>(c)] = slack_ub[static_cast<std::size_t>(k)];
+  }
+  colstart[static_cast<std::size_t>(ncols)] = static_cast<CoinBigIndex>(index.size());
   auto solver = std::make_unique<OsiClpSolverInterface>();
   solver->messageHandler()->setLogLevel(0);
-  solver->loadProblem(rows, lb.data(), ub.data(), obj.data(), rlb.data(), rub.data());
+  solver->loadProblem(ncols, nrows, colstart.data(), index.data(), value.data(), lb.data(), ub.data(),
+                      obj.data(), rlb.data(), rub.data());
   for (int c = 0; c < n + n_arc; ++c) solver->setInteger(c);
   auto model = std::make_unique<CbcModel>(*solver);
   model->setLogLevel(0);
@@ -204,14 +231,16 @@ TrimResult trimKeyframes(const Submap& w, int max_keyframes, const DistillParams
     for (std::size_t k = 1; k < dp.size(); ++k)
       for (int e = 0; e < n_arc; ++e)
         if (arcs[static_cast<std::size_t>(e)].a == dp[k - 1] && arcs[static_cast<std::size_t>(e)].b == dp[k]) start[static_cast<std::size_t>(n + e)] = 1.0;
-    g = 0;
-    for (const auto& [set, count] : groups) {
-      int covered = 0;
-      for (int j : set) covered += start[static_cast<std::size_t>(j)] > 0.5;
-      start[static_cast<std::size_t>(n + n_arc + g)] = std::max(0, std::min<int>(2, static_cast<int>(set.size())) - covered);
-      ++g;
+    std::vector<double> cover(static_cast<std::size_t>(nrows), 0.0);
+    for (int j : dp)
+      for (int row : cover_rows_of[static_cast<std::size_t>(j)]) cover[static_cast<std::size_t>(row)] += 1.0;
+    double o = 0;
+    for (int k = 0; k < n_slack; ++k) {
+      const int row = 1 + n_flow_rows + k;
+      start[static_cast<std::size_t>(n + n_arc + k)] = std::max(0.0, rlb[static_cast<std::size_t>(row)] - cover[static_cast<std::size_t>(row)]);
     }
-    model->setBestSolution(start.data(), ncols, -trimObjective(w, dp, params), true);
+    for (int c = 0; c < ncols; ++c) o += obj[static_cast<std::size_t>(c)] * start[static_cast<std::size_t>(c)];
+    model->setBestSolution(start.data(), ncols, o, true);
   }
   model->branchAndBound();
   const double* best = model->bestSolution();

@@ -1,10 +1,16 @@
 // hermes_bench_mapuse (`./hermes bench mapuse`): distillation on the agent's
 // REAL 5-s windows and how useful the distilled maps are (paper Fig. 15).
-//   1. Renders MH_01 and MH_02 in one hall (cached), runs the stereo front end
-//      (Tracker) on MH_01 and collects its windows.
-//   2. Timing: every strategy distils every window with the coordinator on at a
-//      fixed planning rate: per-window time median/p95, solver status counts,
-//      bytes vs budget.
+//   1. Renders MH_01 and MH_02 in one hall and V1_01 in a hall of its own
+//      (cached), runs the stereo front end (Tracker) on MH_01 (first --map-until
+//      seconds) and on V1_01 (all of it) and collects their windows.
+//   2. Timing on the windows of both sequences: every strategy distils every
+//      window with the coordinator on at a fixed planning rate: per-window time
+//      median/p95, solver status counts, bytes vs budget, Eq. 14 objective.
+//      Selection alone: every window trimmed to distill.max_keyframes, one Eq. 14
+//      instance (K = 60, landmark budget 40 % of all landmarks' bytes) solved by
+//      every strategy: time median/p95, status counts, objective of each strategy
+//      per window relative to greedy_logdet's (median/min), milp vs its greedy
+//      warm start and vs CBC's lower bound.
 //   3. Map usefulness: for K in {300,200,100,50,30} (coordinator off, fixed K
 //      landmarks per keyframe) every strategy distils the windows of the first
 //      part of MH_01; the union of the distilled landmarks is the map. Frames
@@ -23,6 +29,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
+#include <memory>
 #include <map>
 #include <string>
 #include <tuple>
@@ -38,6 +46,8 @@
 #include "hermes/core/metrics.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/distill/distiller.h"
+#include "hermes/distill/keyframe_trimming.h"
+#include "hermes/distill/selectors.h"
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -46,10 +56,12 @@ namespace {
 
 const char* kUsage =
     "usage: hermes_bench_mapuse [--duration S] [--map-until S] [--cache DIR] [--json FILE]\n"
+    "                           [--timing-only]\n"
     "  --duration S   rendered seconds per robot (default 40)\n"
     "  --map-until S  MH_01 windows before this time build the map (default 25); later\n"
     "                 MH_01 frames and all MH_02 frames are localised against it\n"
-    "  --cache DIR    rendered data (default data_cache/bench_mapuse)\n";
+    "  --cache DIR    rendered data (default data_cache/bench_mapuse)\n"
+    "  --timing-only  skip the map-usefulness part (3.)\n";
 
 const std::vector<std::string> kStrategies = {"milp", "greedy_logdet", "stability", "anms", "none"};
 const std::vector<int> kBudgets = {300, 200, 100, 50, 30};
@@ -72,6 +84,35 @@ struct MapPoint {
 };
 
 double percentile(std::vector<double> v, double q) { return timing::percentile(std::move(v), q); }
+
+nlohmann::json summary(const std::vector<double>& v) {
+  if (v.empty()) return nullptr;
+  return {{"median", percentile(v, 50)}, {"p95", percentile(v, 95)},
+          {"min", *std::min_element(v.begin(), v.end())},
+          {"max", *std::max_element(v.begin(), v.end())}, {"n", v.size()}};
+}
+
+/// Renders the trajectories (config/trajectories/<name>.txt) into one hall under
+/// `data` unless a finished rendering is cached there.
+bool renderHall(const fs::path& data, const std::vector<std::string>& names, double duration) {
+  if (fs::exists(data / "done")) return true;
+  std::fprintf(stderr, "[mapuse] rendering %zu trajectories (%g s) into %s\n", names.size(), duration,
+               data.c_str());
+  fs::remove_all(data);
+  const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path();
+  std::string cmd = (bin / "hermes_sim").string();
+  for (const std::string& n : names)
+    cmd += std::string(" --trajectory ") + HERMES_SOURCE_DIR + "/config/trajectories/" + n + ".txt";
+  char tail[512];
+  std::snprintf(tail, sizeof tail, " --out %s --duration %g --seed 1 >/dev/null 2>&1", data.c_str(), duration);
+  cmd += tail;
+  if (std::system(cmd.c_str()) != 0) {
+    std::fprintf(stderr, "rendering failed: %s\n", cmd.c_str());
+    return false;
+  }
+  std::ofstream(data / "done") << "ok\n";
+  return true;
+}
 
 struct Fix {
   bool ok = false;      ///< >= 15 inliers, < 0.10 m, < 2 deg
@@ -130,6 +171,7 @@ Fix localise(const std::vector<MapPoint>& map, const Query& q,
 
 int main(int argc, char** argv) {
   double duration = 40, map_until = 25;
+  bool timing_only = false;
   std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/bench_mapuse", json_out;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -145,6 +187,7 @@ int main(int argc, char** argv) {
     else if (a == "--map-until") map_until = std::atof(next().c_str());
     else if (a == "--cache") cache = next();
     else if (a == "--json") json_out = next();
+    else if (a == "--timing-only") timing_only = true;
     else return std::fprintf(stderr, "hermes_bench_mapuse: unknown argument '%s'\n", a.c_str()), 2;
   }
   if (!(duration > map_until + 5) || !(map_until > 5))
@@ -153,19 +196,10 @@ int main(int argc, char** argv) {
   char key[64];
   std::snprintf(key, sizeof key, "d%g", duration);
   const fs::path data = fs::path(cache) / key;
-  if (!fs::exists(data / "done")) {
-    std::fprintf(stderr, "[mapuse] rendering MH_01 + MH_02 (%g s) into %s\n", duration, data.c_str());
-    fs::remove_all(data);
-    const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path();
-    char cmd[2048];
-    std::snprintf(cmd, sizeof cmd,
-                  "%s --trajectory %s/config/trajectories/MH_01_easy.txt --trajectory "
-                  "%s/config/trajectories/MH_02_easy.txt --out %s --duration %g --seed 1 >/dev/null 2>&1",
-                  (bin / "hermes_sim").c_str(), HERMES_SOURCE_DIR, HERMES_SOURCE_DIR, data.c_str(),
-                  duration);
-    if (std::system(cmd) != 0) return std::fprintf(stderr, "rendering failed: %s\n", cmd), 1;
-    std::ofstream(data / "done") << "ok\n";
-  }
+  const fs::path data_v1 = fs::path(cache) / (std::string(key) + "_V1_01");  // another room: its own hall
+  if (!renderHall(data, {"MH_01_easy", "MH_02_easy"}, duration) ||
+      !renderHall(data_v1, {"V1_01_easy"}, duration))
+    return 1;
 
   // 1. Front end on MH_01: windows, and the map frame A (first camera pose).
   auto ds1 = Dataset::open((data / "MH_01_easy").string(), DatasetParams{});
@@ -216,41 +250,147 @@ int main(int argc, char** argv) {
   std::fprintf(stderr, "[mapuse] %zu windows, %zu later MH_01 queries, %zu MH_02 queries\n",
                windows.size(), queries_same.size(), queries_other.size());
   if (windows.empty() || !T_W_A) return std::fprintf(stderr, "no window / no tracking\n"), 1;
+  // V1_01: all its windows, for the timing and selection parts only.
+  std::vector<Window> windows_v1;
+  {
+    auto ds3 = Dataset::open((data_v1 / "V1_01_easy").string(), DatasetParams{});
+    if (!ds3.ok()) return std::fprintf(stderr, "cannot open the rendered V1_01 data\n"), 1;
+    const DatasetInfo& i3 = (*ds3)->info();
+    Tracker tracker_v1(tp, i3.K, i3.baseline);
+    double last = 0;
+    for (std::size_t i = 0; i < i3.frame_count; ++i) {
+      auto f = loadCameraFrame(**ds3, i);
+      if (!f.ok()) return std::fprintf(stderr, "%s\n", f.error().c_str()), 1;
+      auto r = tracker_v1.feed(*f);
+      if (!r.ok()) return std::fprintf(stderr, "%s\n", r.error().c_str()), 1;
+      if (auto w = tracker_v1.takeWindowIfDue(f->stamp)) windows_v1.push_back({std::move(*w), tracker_v1.motionHint()});
+      last = f->stamp;
+    }
+    if (auto w = tracker_v1.takeWindowIfDue(last + 100)) windows_v1.push_back({std::move(*w), tracker_v1.motionHint()});
+  }
+  std::fprintf(stderr, "[mapuse] %zu V1_01 windows\n", windows_v1.size());
+  std::vector<const Window*> timed;
+  std::vector<std::string> timed_seq;
+  for (const Window& w : windows) timed.push_back(&w), timed_seq.push_back("MH_01_easy");
+  for (const Window& w : windows_v1) timed.push_back(&w), timed_seq.push_back("V1_01_easy");
 
   auto size_fn = [](const Submap& s) { return encodedSizeUncompressed(s); };
   nlohmann::json out;
   out["bench"] = "mapuse";
   out["windows"] = windows.size();
+  out["windows_timed"] = {{"MH_01_easy", windows.size()}, {"V1_01_easy", windows_v1.size()}};
 
   // 2. Timing on real windows, coordinator on (planning rate 30 kB/s).
+  // One Distiller per strategy; the strategies take turns on each window, so
+  // that a loaded machine affects every strategy alike.
   nlohmann::json timing_json;
+  std::map<std::string, std::unique_ptr<distill::Distiller>> distillers;
+  std::map<std::string, std::vector<double>> ms, sel_ms, trim_ms, objective, rounds;
+  std::map<std::string, std::map<std::string, int>> status;
+  std::map<std::string, std::map<std::string, double>> bytes, budget;
+  std::map<std::string, int> over;
+  std::vector<double> milp_vs_warm;  // milp objective / its greedy warm start's (same instance)
   for (const std::string& s : kStrategies) {
     distill::DistillParams dp;
     dp.strategy = s;
     auto d = distill::Distiller::create(dp, size_fn);
     if (!d.ok()) return std::fprintf(stderr, "%s\n", d.error().c_str()), 1;
-    std::vector<double> ms;
-    std::map<std::string, int> status;
-    double bytes = 0, budget = 0;
-    int over = 0;
-    for (const Window& w : windows) {
+    distillers[s] = std::move(*d);
+  }
+  for (std::size_t wi = 0; wi < timed.size(); ++wi) {
+    const Window& w = *timed[wi];
+    for (const std::string& s : kStrategies) {
       distill::CoordinatorInput in;
       in.bandwidth_Bps = 30000;
+      distill::Distiller& d = *distillers[s];
       const auto a = std::chrono::steady_clock::now();
-      const distill::DistillResult r = (*d)->distill(w.submap, w.hint, in);
-      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count());
-      ++status[r.report.deferred ? "deferred" : r.report.selection_status];
-      bytes += double(r.report.bytes_actual);
-      budget += std::isfinite(r.report.budget_bytes) ? r.report.budget_bytes : 0;
-      over += r.report.over_budget;
+      const distill::DistillResult r = d.distill(w.submap, w.hint, in);
+      ms[s].push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count());
+      sel_ms[s].push_back(r.report.time_select_ms);
+      trim_ms[s].push_back(r.report.time_trim_ms);
+      rounds[s].push_back(r.report.rounds);
+      ++status[s][r.report.deferred ? "deferred" : r.report.selection_status];
+      bytes[s][timed_seq[wi]] += double(r.report.bytes_actual);
+      budget[s][timed_seq[wi]] += std::isfinite(r.report.budget_bytes) ? r.report.budget_bytes : 0;
+      over[s] += r.report.over_budget;
+      objective[s].push_back(r.report.objective);
+      if (s == "milp" && r.report.greedy_objective > 0)
+        milp_vs_warm.push_back(r.report.objective / r.report.greedy_objective);
     }
-    timing_json[s] = {{"median_ms", percentile(ms, 50)}, {"p95_ms", percentile(ms, 95)},
-                      {"status", status}, {"bytes", bytes}, {"budget_bytes", budget},
-                      {"over_budget", over}};
-    std::fprintf(stderr, "[mapuse] timing %-14s median %7.1f ms  p95 %7.1f ms  bytes %8.0f / budget %8.0f\n",
-                 s.c_str(), percentile(ms, 50), percentile(ms, 95), bytes, budget);
   }
+  for (const std::string& s : kStrategies) {
+    double b = 0, bb = 0;
+    for (const auto& [seq, v] : bytes[s]) b += v, bb += budget[s][seq];
+    timing_json[s] = {{"median_ms", percentile(ms[s], 50)}, {"p95_ms", percentile(ms[s], 95)},
+                      {"select_ms", summary(sel_ms[s])}, {"trim_ms", summary(trim_ms[s])},
+                      {"rounds", summary(rounds[s])}, {"status", status[s]},
+                      {"bytes", b}, {"budget_bytes", bb}, {"bytes_per_sequence", bytes[s]},
+                      {"budget_per_sequence", budget[s]}, {"over_budget", over[s]},
+                      {"eq14_objective", summary(objective[s])}};
+    std::fprintf(stderr, "[mapuse] timing %-14s median %7.1f ms  p95 %7.1f ms (select %6.1f / %6.1f, trim %6.1f)  bytes %8.0f / budget %8.0f\n",
+                 s.c_str(), percentile(ms[s], 50), percentile(ms[s], 95), percentile(sel_ms[s], 50),
+                 percentile(sel_ms[s], 95), percentile(trim_ms[s], 50), b, bb);
+  }
+  timing_json["milp_objective_over_its_greedy_warm_start"] = summary(milp_vs_warm);
+  timing_json["ratio_to_greedy_logdet_median_ms"] = {};
+  for (const std::string& s : kStrategies)
+    timing_json["ratio_to_greedy_logdet_median_ms"][s] =
+        percentile(ms[s], 50) / std::max(1e-9, percentile(ms["greedy_logdet"], 50));
   out["timing_30kBps"] = timing_json;
+
+  // Selection alone, every strategy on the same Eq. 14 instance per window.
+  {
+    distill::DistillParams dp;
+    std::map<std::string, std::vector<double>> t_ms, rel;
+    std::map<std::string, std::map<std::string, int>> st;
+    std::vector<double> milp_vs_warm_sel, milp_gap;
+    int budget_violations = 0;
+    for (const Window* w : timed) {
+      const distill::TrimResult trim = distill::trimKeyframes(w->submap, dp.max_keyframes, dp);
+      const Submap trimmed = distill::applyKeyframeTrim(w->submap, trim.kept, dp);
+      const distill::LandmarkScores sc = distill::computeScores(trimmed, w->hint, 0, dp);
+      distill::SelectionProblem p = distill::buildSelectionProblem(
+          trimmed, sc, 60, std::numeric_limits<double>::infinity(), dp.bytes_lm, dp.bytes_obs, dp);
+      double all = 0;
+      for (double b : p.bytes) all += b;
+      p.budget = 0.4 * all;
+      std::map<std::string, double> obj;
+      for (const std::string& s : kStrategies) {
+        if (s == "none") continue;
+        auto sel = distill::makeLandmarkSelector(s, dp);
+        const auto a = std::chrono::steady_clock::now();
+        const distill::SelectionResult r = (*sel)->select(p);
+        t_ms[s].push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count());
+        ++st[s][distill::toString(r.status)];
+        obj[s] = r.objective;
+        budget_violations += r.bytes > p.budget;
+        if (s == "milp") {
+          milp_vs_warm_sel.push_back(r.objective / r.greedy_objective);
+          milp_gap.push_back(std::max(0.0, r.objective - r.lower_bound) / std::abs(r.objective));
+        }
+      }
+      for (const auto& [s, o] : obj) rel[s].push_back(o / obj["greedy_logdet"]);
+    }
+    nlohmann::json sj;
+    sj["instance"] = "trimmed to distill.max_keyframes, K = 60, landmark budget 40 % of all landmarks' bytes";
+    for (const auto& [s, v] : t_ms)
+      sj[s] = {{"select_ms", summary(v)}, {"status", st[s]},
+               {"objective_over_greedy_logdet", summary(rel[s])}};
+    sj["milp_objective_over_its_greedy_warm_start"] = summary(milp_vs_warm_sel);
+    sj["milp_optimality_gap"] = summary(milp_gap);
+    sj["budget_violations"] = budget_violations;
+    out["selection_k60"] = sj;
+    for (const auto& [s, v] : t_ms)
+      std::fprintf(stderr, "[mapuse] select K=60 %-14s median %6.1f ms  p95 %6.1f ms  objective / greedy_logdet median %.3f min %.3f\n",
+                   s.c_str(), percentile(v, 50), percentile(v, 95), percentile(rel[s], 50),
+                   *std::min_element(rel[s].begin(), rel[s].end()));
+  }
+  if (timing_only) {
+    const std::string text = out.dump(2);
+    if (json_out.empty()) std::cout << text << "\n";
+    else std::ofstream(json_out) << text << "\n";
+    return 0;
+  }
 
   // 3. Map usefulness per (K, strategy).
   nlohmann::json rows = nlohmann::json::array();

@@ -11,7 +11,10 @@
 // Σ_b z_ab = y_a (a ≠ last), Σ_a z_ab = y_b (b ≠ first) forces the kept keyframes
 // to form one chain of arcs from first to last, so every consecutive kept pair is
 // an arc. Landmarks with the same set of observing keyframes share one ε (weighted
-// by their count), which keeps the MILP tiny. CBC solves it warm-started from a
+// by their count); since the first and last keyframe are always kept, a group seen
+// by <= 2 keyframes has the linear ε = need − Σ y (folded into the y costs) and a
+// group holding both ends is always covered, so only groups of >= 3 keyframes keep
+// a row. CBC solves it warm-started from a
 // dynamic programme (best Σ s_j path with <= N_KF nodes, ignoring coverage); the DP
 // path is also the fallback. If no arc path with <= N_KF keyframes exists, the
 // path with the fewest keyframes is returned (status infeasible_relaxed).

@@ -39,6 +39,9 @@ struct SelectionProblem {
   double lambda_support = 2.0, lambda_grid = 1.5;
   int k = 0;
   double time_limit_s = 0;  ///< > 0 overrides the MILP selector's own time limit
+  /// Optional selection (e.g. the previous coordinator round's) that the MILP
+  /// also considers as its warm start; ignored when it does not fit the budget.
+  std::vector<int> warm_start;
   // Data the heuristic strategies use.
   std::vector<double> q_s;
   std::vector<double> value;
