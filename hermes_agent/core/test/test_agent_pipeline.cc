@@ -187,6 +187,19 @@ class SyntheticWindowSource {
 
 struct NoWindows {};
 
+/// Forwards one window of `source`, then none: a robot that stops mapping.
+struct OneWindowSource {
+  SyntheticWindowSource* source;
+  int left = 1;
+  std::optional<Submap> takeWindowIfDue(double t) {
+    if (left <= 0) return std::nullopt;
+    auto w = source->takeWindowIfDue(t);
+    if (w) --left;
+    return w;
+  }
+  distill::MotionHint motionHint() const { return source->motionHint(); }
+};
+
 }  // namespace
 
 TEST(WindowStep, DistillsAndEncodesEveryWindowWithinBudget) {
@@ -280,7 +293,12 @@ TEST(WindowStep, CarriedWindowIsRetriedWithoutANewWindow) {
   ASSERT_EQ(counters.refused, 1);
   ASSERT_TRUE(counters.carry.has_value());
   EXPECT_EQ(counters.carry_periods, 1);
-  agent::retryCarriedWindow(source, **distiller, monitor, 11.0, &counters, &timings, &sink);
+  // No new window comes; the carried one is retried a period after its refusal.
+  OneWindowSource stalled{&source, 0};
+  for (int i = 21; i < 100; ++i)  // 6.05 .. 9.95 s
+    agent::runWindowStep(stalled, **distiller, monitor, 5.0 + 0.05 * i, &counters, &timings, &sink);
+  EXPECT_TRUE(counters.carry.has_value()) << "retried before a period passed";
+  agent::runWindowStep(stalled, **distiller, monitor, 10.05, &counters, &timings, &sink);
   EXPECT_FALSE(counters.carry.has_value());
   ASSERT_EQ(accepted.size(), 1u);
   EXPECT_EQ(counters.sent, 1);

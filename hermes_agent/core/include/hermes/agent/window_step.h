@@ -36,6 +36,7 @@ struct WindowCounters {
   std::int64_t carry_dropped_keyframes = 0;  ///< dropped by the kMaxCarryKeyframes bound
   std::optional<Submap> carry;  ///< deferred / refused window waiting for the next
   int carry_periods = 0;        ///< window periods the carried window stands for
+  double carry_stamp = 0;       ///< [s] when it was last deferred / refused
 };
 
 template <typename T, typename = void>
@@ -98,6 +99,7 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
   auto keep = [&] {
     counters->carry = std::move(window);
     counters->carry_periods = periods;
+    counters->carry_stamp = stamp;
   };
   if (r.report.deferred) {
     ++counters->deferred;
@@ -123,15 +125,25 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
   counters->bytes += size;
 }
 
+template <typename TrackerT>
+void retryCarriedWindow(TrackerT& tracker, distill::Distiller& distiller,
+                        const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
+                        TimingStats* timings, const WindowSink* sink = nullptr);
+
 /// One window step at time `stamp` [s]: the tracker's due window, merged with
-/// the carried one, distilled and submitted.
+/// the carried one, distilled and submitted. Without a new window (no new
+/// keyframes: the robot stands still) a carried one is retried once a period.
 template <typename TrackerT>
 void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
                    const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
                    TimingStats* timings, const WindowSink* sink = nullptr) {
   if constexpr (TrackerHasWindows<TrackerT>::value) {
     std::optional<Submap> window = tracker.takeWindowIfDue(stamp);
-    if (!window) return;
+    if (!window) {
+      if (counters->carry && stamp - counters->carry_stamp >= distiller.params().window_s)
+        retryCarriedWindow(tracker, distiller, monitor, stamp, counters, timings, sink);
+      return;
+    }
     ++counters->windows;
     int periods = 1;
     if (counters->carry) {
@@ -162,12 +174,12 @@ void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
   }
 }
 
-/// When no new window comes (the sequence ended), the carried window is tried
-/// again one period later: it now stands for one more period of the link.
+/// When no new window comes (the sequence ended, the robot stands still), the
+/// carried window is tried again: it now stands for one more period of the link.
 template <typename TrackerT>
 void retryCarriedWindow(TrackerT& tracker, distill::Distiller& distiller,
                         const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
-                        TimingStats* timings, const WindowSink* sink = nullptr) {
+                        TimingStats* timings, const WindowSink* sink) {
   if constexpr (TrackerHasWindows<TrackerT>::value) {
     if (!counters->carry) return;
     Submap window = std::move(*counters->carry);
