@@ -200,17 +200,24 @@ struct OneWindowSource {
   distill::MotionHint motionHint() const { return source->motionHint(); }
 };
 
+Expected<distill::SyntheticScene> v101Scene() {
+  return distill::makeSceneFromTum(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt",
+                                   distill::SyntheticWindowParams{});
+}
+
+/// greedy_logdet is fast; the selectors themselves are tested in hermes_distill.
+Expected<std::unique_ptr<distill::Distiller>> greedyDistiller() {
+  distill::DistillParams dp;
+  dp.strategy = "greedy_logdet";
+  return distill::Distiller::create(dp, [](const Submap& s) { return encodedSizeUncompressed(s); });
+}
+
 }  // namespace
 
 TEST(WindowStep, DistillsAndEncodesEveryWindowWithinBudget) {
-  distill::SyntheticWindowParams wp;
-  auto scene = distill::makeSceneFromTum(
-      std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt", wp);
+  auto scene = v101Scene();
   ASSERT_TRUE(scene.ok()) << scene.error();
-  distill::DistillParams dp;
-  dp.strategy = "greedy_logdet";  // fast; the selector itself is tested in hermes_distill
-  auto distiller =
-      distill::Distiller::create(dp, [](const Submap& s) { return encodedSizeUncompressed(s); });
+  auto distiller = greedyDistiller();
   ASSERT_TRUE(distiller.ok()) << distiller.error();
   agent::BandwidthMonitorParams mp;
   mp.initial_bps = 20000;  // 20 kB/s: the raw windows do not fit
@@ -265,14 +272,9 @@ TEST(WindowStep, DistillsAndEncodesEveryWindowWithinBudget) {
 // After the sequence ends no new window comes: a window the uplink refused is
 // tried again by retryCarriedWindow (standing for one more period), not lost.
 TEST(WindowStep, CarriedWindowIsRetriedWithoutANewWindow) {
-  distill::SyntheticWindowParams wp;
-  auto scene = distill::makeSceneFromTum(
-      std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt", wp);
+  auto scene = v101Scene();
   ASSERT_TRUE(scene.ok()) << scene.error();
-  distill::DistillParams dp;
-  dp.strategy = "greedy_logdet";
-  auto distiller =
-      distill::Distiller::create(dp, [](const Submap& s) { return encodedSizeUncompressed(s); });
+  auto distiller = greedyDistiller();
   ASSERT_TRUE(distiller.ok()) << distiller.error();
   agent::BandwidthMonitor monitor{agent::BandwidthMonitorParams{}};
   SyntheticWindowSource source(&*scene);
