@@ -59,27 +59,50 @@ bool refineDisparitySad(const cv::Mat& L, const cv::Mat& R, int xl, int y, int x
   if (y - w < 0 || y + w >= L.rows || y + w >= R.rows) return false;
   if (xl - w < 0 || xl + w >= L.cols) return false;
   if (xr0 - w - radius - 1 < 0 || xr0 + w + radius + 1 >= R.cols) return false;
-  const int n = 2 * w + 1;
-  // Zero-mean patches make the cost insensitive to a brightness offset between cameras.
-  double mean_l = 0;
-  for (int dy = -w; dy <= w; ++dy)
-    for (int dx = -w; dx <= w; ++dx) mean_l += L.at<uchar>(y + dy, xl + dx);
-  mean_l /= n * n;
-  std::vector<double> c(2 * radius + 3);
-  for (int k = -radius - 1; k <= radius + 1; ++k) {
-    const int xr = xr0 + k;
-    double mean_r = 0;
-    for (int dy = -w; dy <= w; ++dy)
-      for (int dx = -w; dx <= w; ++dx) mean_r += R.at<uchar>(y + dy, xr + dx);
-    mean_r /= n * n;
-    double sad = 0;
-    for (int dy = -w; dy <= w; ++dy) {
-      const uchar* lr = L.ptr<uchar>(y + dy);
-      const uchar* rr = R.ptr<uchar>(y + dy);
-      for (int dx = -w; dx <= w; ++dx)
-        sad += std::abs((lr[xl + dx] - mean_l) - (rr[xr + dx] - mean_r));
+  constexpr int kMaxN = 31, kMaxPos = 2 * 15 + 3, kLanes = 8;  // w, radius <= 15
+  HERMES_CHECK(w >= 1 && w <= 15 && radius >= 1 && radius <= 15,
+               "refineDisparitySad: half window and radius must be in [1, 15]");
+  const int n = 2 * w + 1, nn = n * n, npos = 2 * radius + 3;
+  // Zero-mean patches make the cost insensitive to a brightness offset between
+  // cameras. With S the patch sums, sum |(l - S_l/nn) - (r - S_r/nn)| equals
+  // sum |(nn l - S_l) - (nn r - S_r)| / nn, which is summed exactly in integers.
+  int a[kMaxN][kMaxN];
+  int sum_l = 0;
+  for (int dy = -w; dy <= w; ++dy) {
+    const uchar* lr = L.ptr<uchar>(y + dy) + xl - w;
+    for (int dx = 0; dx < n; ++dx) sum_l += lr[dx];
+  }
+  for (int dy = 0; dy < n; ++dy) {
+    const uchar* lr = L.ptr<uchar>(y + dy - w) + xl - w;
+    for (int dx = 0; dx < n; ++dx) a[dy][dx] = nn * lr[dx] - sum_l;
+  }
+  // The right band: shift i (0..npos-1, i.e. k = i - radius - 1) covers its
+  // columns [i, i + n); nn r is stored padded so that kLanes shifts at a time
+  // read contiguous memory (the padding lanes are computed and dropped).
+  const int x_first = xr0 - radius - 1 - w, ncols = n + npos - 1;
+  int rr[kMaxN][kMaxN + kMaxPos + kLanes];
+  int col[kMaxN + kMaxPos] = {0};
+  for (int dy = 0; dy < n; ++dy) {
+    const uchar* row = R.ptr<uchar>(y + dy - w) + x_first;
+    for (int x = 0; x < ncols; ++x) {
+      rr[dy][x] = nn * row[x];
+      col[x] += row[x];
     }
-    c[k + radius + 1] = sad;
+    for (int x = ncols; x < ncols + kLanes; ++x) rr[dy][x] = 0;
+  }
+  int sum_r[kMaxPos + kLanes] = {0};  // patch sum at each shift (sliding column sums)
+  for (int x = 0; x < n; ++x) sum_r[0] += col[x];
+  for (int i = 1; i < npos; ++i) sum_r[i] = sum_r[i - 1] + col[i + n - 1] - col[i - 1];
+  double c[kMaxPos + kLanes];
+  for (int i0 = 0; i0 < npos; i0 += kLanes) {
+    int acc[kLanes] = {0};
+    for (int dy = 0; dy < n; ++dy)
+      for (int dx = 0; dx < n; ++dx) {
+        const int av = a[dy][dx];
+        const int* r = &rr[dy][i0 + dx];
+        for (int j = 0; j < kLanes; ++j) acc[j] += std::abs(av + sum_r[i0 + j] - r[j]);
+      }
+    for (int j = 0; j < kLanes; ++j) c[i0 + j] = double(acc[j]) / nn;
   }
   // The minimum over [-radius, radius]; entries ±(radius+1) only serve the fit.
   int best = 1;
