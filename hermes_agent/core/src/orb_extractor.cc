@@ -253,6 +253,7 @@ Expected<FeatureSet> OrbExtractor::extract(const cv::Mat& image) const {
   // cv::ORB drops keypoints too close to the border, so results are
   // re-associated by class_id.
   std::vector<cv::KeyPoint> level_kps, described;
+  std::vector<int> row_of;  // level keypoint -> descriptor row (-1: dropped)
   cv::Mat desc;
   fs.keypoints.reserve(params_.num_features);
   fs.descriptors.reserve(params_.num_features);
@@ -262,24 +263,36 @@ Expected<FeatureSet> OrbExtractor::extract(const cv::Mat& image) const {
     level_kps.clear();
     detectLevel(fs.pyramid[l], l, &level_kps);
     if (level_kps.empty()) continue;
+    // Orientation and descriptors are computed top to bottom (patches then walk
+    // the image row by row instead of jumping between buckets); the output
+    // keeps the bucket order.
     for (std::size_t i = 0; i < level_kps.size(); ++i) {
       cv::KeyPoint& k = level_kps[i];
-      k.angle = centroidAngle(fs.pyramid[l], int(k.pt.x), int(k.pt.y), umax_);
       k.octave = 0;  // level coordinates for the single-level descriptor call
       k.size = float(kPatchSize);
       k.class_id = int(i);
     }
     described = level_kps;
+    std::stable_sort(described.begin(), described.end(),
+                     [](const cv::KeyPoint& a, const cv::KeyPoint& b) { return a.pt.y < b.pt.y; });
+    for (cv::KeyPoint& k : described) {
+      k.angle = centroidAngle(fs.pyramid[l], int(k.pt.x), int(k.pt.y), umax_);
+      level_kps[k.class_id].angle = k.angle;
+    }
     describer_->compute(fs.pyramid[l], described, desc);
-    for (std::size_t i = 0; i < described.size(); ++i) {
-      const cv::KeyPoint& src = level_kps[described[i].class_id];
+    row_of.assign(level_kps.size(), -1);
+    for (std::size_t i = 0; i < described.size(); ++i) row_of[described[i].class_id] = int(i);
+    for (std::size_t i = 0; i < level_kps.size(); ++i) {
+      if (row_of[i] < 0) continue;
+      const cv::KeyPoint& src = level_kps[i];
       Keypoint k;
       k.u = src.pt.x * scales_[l];
       k.v = src.pt.y * scales_[l];
       k.octave = std::uint8_t(l);
       fs.keypoints.push_back(k);
       Descriptor d;
-      std::copy(desc.ptr<uchar>(int(i)), desc.ptr<uchar>(int(i)) + 32, d.begin());
+      const uchar* row = desc.ptr<uchar>(row_of[i]);
+      std::copy(row, row + 32, d.begin());
       fs.descriptors.push_back(d);
       fs.angles.push_back(src.angle);
       fs.responses.push_back(src.response);

@@ -142,14 +142,26 @@ Expected<StereoResult> matchStereo(FeatureSet* left, const FeatureSet& right,
   const double min_d = K.fx * baseline / p.max_depth;
   const double max_d = K.fx * baseline / p.min_depth;
 
-  // Row index: every right keypoint is listed in all rows its band covers.
-  std::vector<std::vector<int>> rows(H);
-  for (int j = 0; j < int(right.size()); ++j) {
-    const Keypoint& k = right.keypoints[j];
+  // Row index: every right keypoint is listed in all rows its band covers, in
+  // one flat array (row y: row_index[row_start[y] .. row_start[y + 1]), j ascending).
+  std::vector<int> row_start(H + 1, 0), row_index;
+  auto bandOf = [&](const Keypoint& k) {
     const double r = p.row_band_px * right.scales[k.octave];
-    const int y0 = std::max(0, int(std::floor(k.v - r)));
-    const int y1 = std::min(H - 1, int(std::ceil(k.v + r)));
-    for (int y = y0; y <= y1; ++y) rows[y].push_back(j);
+    return std::pair<int, int>(std::max(0, int(std::floor(k.v - r))),
+                               std::min(H - 1, int(std::ceil(k.v + r))));
+  };
+  for (const Keypoint& k : right.keypoints) {
+    const auto [y0, y1] = bandOf(k);
+    for (int y = y0; y <= y1; ++y) ++row_start[y + 1];
+  }
+  for (int y = 0; y < H; ++y) row_start[y + 1] += row_start[y];
+  row_index.resize(row_start[H]);
+  {
+    std::vector<int> fill(row_start.begin(), row_start.end() - 1);
+    for (int j = 0; j < int(right.size()); ++j) {
+      const auto [y0, y1] = bandOf(right.keypoints[j]);
+      for (int y = y0; y <= y1; ++y) row_index[fill[y]++] = j;
+    }
   }
 
   StereoResult out;
@@ -157,13 +169,22 @@ Expected<StereoResult> matchStereo(FeatureSet* left, const FeatureSet& right,
   out.u_right.assign(n, -1.f);
   out.disparity.assign(n, 0.f);
   std::vector<double> costs(n, -1.0);
-  for (int i = 0; i < n; ++i) {
+  // Keypoints are visited top to bottom (each is matched on its own, so the
+  // order changes no result): the SAD patches then walk the images row by row
+  // instead of jumping between buckets.
+  std::vector<int> order(n);
+  for (int i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return left->keypoints[a].v < left->keypoints[b].v;
+  });
+  for (int i : order) {
     Keypoint& kl = left->keypoints[i];
     kl.depth = 0.f;
     const int row = int(std::lround(kl.v));
     if (row < 0 || row >= H) continue;
     int best = std::numeric_limits<int>::max(), second = best, best_j = -1;
-    for (int j : rows[row]) {
+    for (int q = row_start[row]; q < row_start[row + 1]; ++q) {
+      const int j = row_index[q];
       const Keypoint& kr = right.keypoints[j];
       if (std::abs(int(kr.octave) - int(kl.octave)) > 1) continue;
       const double d = kl.u - kr.u;
