@@ -1,5 +1,6 @@
 #include "hermes/agent/pose_estimation.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <opencv2/calib3d.hpp>
@@ -69,6 +70,86 @@ double sigmaOf(const Correspondences& c, std::size_t i) {
   return c.sigma_px.empty() ? 1.0 : c.sigma_px[i];
 }
 
+/// Robust reprojection cost 1/2 sum rho(|r_i|^2) over the observations in `use`
+/// (Huber rho with width `huber`, r = ReprojectionResidual), and when H and g are
+/// given the Gauss-Newton normal equations in the left perturbation
+/// T <- (Exp(phi) R, Exp(phi) t + rho), xi = (rho, phi), with IRLS weights rho'.
+double robustCost(const Correspondences& c, const PinholeIntrinsics& K, const std::vector<bool>& use,
+                  double huber, const Mat3& R, const Vec3& t, Mat6* H, Vec6* g) {
+  const double a2 = huber * huber;
+  double cost = 0;
+  if (H) {
+    H->setZero();
+    g->setZero();
+  }
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    if (!use[i]) continue;
+    const Vec3 p = R * c.p_W[i] + t;
+    const double inv_s = 1.0 / sigmaOf(c, i);
+    if (p.z() <= 1e-6) {  // behind the camera: the residual's constant (1e3, 1e3), no gradient
+      cost += 0.5 * (2 * huber * std::sqrt(2e6) - a2);
+      continue;
+    }
+    const double iz = 1.0 / p.z();
+    const Vec2 r((K.fx * p.x() * iz + K.cx - c.uv[i].x()) * inv_s,
+                 (K.fy * p.y() * iz + K.cy - c.uv[i].y()) * inv_s);
+    const double s = r.squaredNorm();
+    double w = 1.0;
+    if (s <= a2) {
+      cost += 0.5 * s;
+    } else {
+      const double root = std::sqrt(s);
+      cost += 0.5 * (2 * huber * root - a2);
+      w = huber / root;
+    }
+    if (!H) continue;
+    Eigen::Matrix<double, 2, 3> Jp;
+    Jp << K.fx * iz, 0, -K.fx * p.x() * iz * iz, 0, K.fy * iz, -K.fy * p.y() * iz * iz;
+    Jp *= inv_s;
+    Eigen::Matrix<double, 2, 6> J;
+    J.leftCols<3>() = Jp;
+    J.rightCols<3>() = -Jp * hat(p);
+    H->noalias() += w * J.transpose() * J;
+    g->noalias() += w * J.transpose() * r;
+  }
+  return cost;
+}
+
+/// Levenberg-Marquardt on robustCost, at most `iterations` steps (tried or taken),
+/// stopping once the relative cost decrease < 1e-10, the step < 1e-10 relative,
+/// or the gradient < 1e-10 (tighter than Ceres' defaults: an iteration costs
+/// little here, and the Huber tails make the cost flat near the minimum).
+void minimiseRobustCost(const Correspondences& c, const PinholeIntrinsics& K,
+                        const std::vector<bool>& use, double huber, int iterations, Mat3* R,
+                        Vec3* t) {
+  Mat6 H;
+  Vec6 g;
+  double cost = robustCost(c, K, use, huber, *R, *t, &H, &g);
+  double lambda = 1e-4;
+  for (int it = 0; it < iterations; ++it) {
+    if (g.lpNorm<Eigen::Infinity>() < 1e-10) break;
+    Mat6 A = H;
+    A.diagonal() += lambda * H.diagonal().cwiseMax(1e-6);
+    const Vec6 step = A.ldlt().solve(-g);
+    if (!step.allFinite()) break;
+    const Mat3 dR = expSO3(step.tail<3>());
+    const Mat3 R_new = Quat(dR * *R).normalized().toRotationMatrix();
+    const Vec3 t_new = dR * *t + step.head<3>();
+    const double new_cost = robustCost(c, K, use, huber, R_new, t_new, nullptr, nullptr);
+    if (new_cost < cost) {
+      const bool small_change = cost - new_cost < 1e-10 * cost ||
+                                step.norm() < 1e-10 * (t->norm() + 1e-8);
+      *R = R_new;
+      *t = t_new;
+      lambda = std::max(lambda / 3, 1e-12);
+      if (small_change) break;
+      cost = robustCost(c, K, use, huber, *R, *t, &H, &g);
+    } else {
+      lambda *= 4;
+    }
+  }
+}
+
 }  // namespace
 
 Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrinsics& K,
@@ -77,10 +158,8 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
   Status s = checkInput(c, p);
   if (!s) return Error{s.error()};
   const std::size_t n = c.size();
-  Quat q = T_C_W_init.quat();
-  double qa[4] = {q.x(), q.y(), q.z(), q.w()};
-  Vec3 tv = T_C_W_init.translation();
-  double ta[3] = {tv.x(), tv.y(), tv.z()};
+  Mat3 R = T_C_W_init.rotation();
+  Vec3 t = T_C_W_init.translation();
   std::vector<bool> inlier(n, true);
   if (initial_inliers) {
     if (initial_inliers->size() != n)
@@ -90,6 +169,8 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
   std::vector<double> chi2(n, 0.0);
 
   auto classify = [&]() {
+    const Quat q(R);
+    const double qa[4] = {q.x(), q.y(), q.z(), q.w()}, ta[3] = {t.x(), t.y(), t.z()};
     for (std::size_t i = 0; i < n; ++i) {
       ReprojectionResidual f(c.uv[i], c.p_W[i], K, sigmaOf(c, i));
       double r[2];
@@ -99,30 +180,13 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
     }
   };
   for (int round = 0; round < p.refine_rounds; ++round) {
-    ceres::Problem::Options po;
-    po.manifold_ownership = ceres::TAKE_OWNERSHIP;
-    ceres::Problem problem(po);
-    problem.AddParameterBlock(qa, 4, new ceres::EigenQuaternionManifold());
-    problem.AddParameterBlock(ta, 3);
-    int used = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!inlier[i]) continue;
-      problem.AddResidualBlock(ReprojectionResidual::create(c.uv[i], c.p_W[i], K, sigmaOf(c, i)),
-                               new ceres::HuberLoss(p.huber_px), qa, ta);
-      ++used;
-    }
+    const int used = int(std::count(inlier.begin(), inlier.end(), true));
     if (used < p.min_inliers) break;
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = p.iterations_per_round;
-    so.num_threads = 1;
-    so.logging_type = ceres::SILENT;
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
+    minimiseRobustCost(c, K, inlier, p.huber_px, p.iterations_per_round, &R, &t);
     classify();  // every observation, so wrongly rejected ones can come back
   }
   PoseEstimate out;
-  out.T_C_W = SE3(Quat(qa[3], qa[0], qa[1], qa[2]), Vec3(ta[0], ta[1], ta[2]));
+  out.T_C_W = SE3(R, t);
   out.inlier = inlier;
   double sq = 0;
   for (std::size_t i = 0; i < n; ++i) {

@@ -59,27 +59,50 @@ bool refineDisparitySad(const cv::Mat& L, const cv::Mat& R, int xl, int y, int x
   if (y - w < 0 || y + w >= L.rows || y + w >= R.rows) return false;
   if (xl - w < 0 || xl + w >= L.cols) return false;
   if (xr0 - w - radius - 1 < 0 || xr0 + w + radius + 1 >= R.cols) return false;
-  const int n = 2 * w + 1;
-  // Zero-mean patches make the cost insensitive to a brightness offset between cameras.
-  double mean_l = 0;
-  for (int dy = -w; dy <= w; ++dy)
-    for (int dx = -w; dx <= w; ++dx) mean_l += L.at<uchar>(y + dy, xl + dx);
-  mean_l /= n * n;
-  std::vector<double> c(2 * radius + 3);
-  for (int k = -radius - 1; k <= radius + 1; ++k) {
-    const int xr = xr0 + k;
-    double mean_r = 0;
-    for (int dy = -w; dy <= w; ++dy)
-      for (int dx = -w; dx <= w; ++dx) mean_r += R.at<uchar>(y + dy, xr + dx);
-    mean_r /= n * n;
-    double sad = 0;
-    for (int dy = -w; dy <= w; ++dy) {
-      const uchar* lr = L.ptr<uchar>(y + dy);
-      const uchar* rr = R.ptr<uchar>(y + dy);
-      for (int dx = -w; dx <= w; ++dx)
-        sad += std::abs((lr[xl + dx] - mean_l) - (rr[xr + dx] - mean_r));
+  constexpr int kMaxN = 31, kMaxPos = 2 * 15 + 3, kLanes = 8;  // w, radius <= 15
+  HERMES_CHECK(w >= 1 && w <= 15 && radius >= 1 && radius <= 15,
+               "refineDisparitySad: half window and radius must be in [1, 15]");
+  const int n = 2 * w + 1, nn = n * n, npos = 2 * radius + 3;
+  // Zero-mean patches make the cost insensitive to a brightness offset between
+  // cameras. With S the patch sums, sum |(l - S_l/nn) - (r - S_r/nn)| equals
+  // sum |(nn l - S_l) - (nn r - S_r)| / nn, which is summed exactly in integers.
+  int a[kMaxN][kMaxN];
+  int sum_l = 0;
+  for (int dy = -w; dy <= w; ++dy) {
+    const uchar* lr = L.ptr<uchar>(y + dy) + xl - w;
+    for (int dx = 0; dx < n; ++dx) sum_l += lr[dx];
+  }
+  for (int dy = 0; dy < n; ++dy) {
+    const uchar* lr = L.ptr<uchar>(y + dy - w) + xl - w;
+    for (int dx = 0; dx < n; ++dx) a[dy][dx] = nn * lr[dx] - sum_l;
+  }
+  // The right band: shift i (0..npos-1, i.e. k = i - radius - 1) covers its
+  // columns [i, i + n); nn r is stored padded so that kLanes shifts at a time
+  // read contiguous memory (the padding lanes are computed and dropped).
+  const int x_first = xr0 - radius - 1 - w, ncols = n + npos - 1;
+  int rr[kMaxN][kMaxN + kMaxPos + kLanes];
+  int col[kMaxN + kMaxPos] = {0};
+  for (int dy = 0; dy < n; ++dy) {
+    const uchar* row = R.ptr<uchar>(y + dy - w) + x_first;
+    for (int x = 0; x < ncols; ++x) {
+      rr[dy][x] = nn * row[x];
+      col[x] += row[x];
     }
-    c[k + radius + 1] = sad;
+    for (int x = ncols; x < ncols + kLanes; ++x) rr[dy][x] = 0;
+  }
+  int sum_r[kMaxPos + kLanes] = {0};  // patch sum at each shift (sliding column sums)
+  for (int x = 0; x < n; ++x) sum_r[0] += col[x];
+  for (int i = 1; i < npos; ++i) sum_r[i] = sum_r[i - 1] + col[i + n - 1] - col[i - 1];
+  double c[kMaxPos + kLanes];
+  for (int i0 = 0; i0 < npos; i0 += kLanes) {
+    int acc[kLanes] = {0};
+    for (int dy = 0; dy < n; ++dy)
+      for (int dx = 0; dx < n; ++dx) {
+        const int av = a[dy][dx];
+        const int* r = &rr[dy][i0 + dx];
+        for (int j = 0; j < kLanes; ++j) acc[j] += std::abs(av + sum_r[i0 + j] - r[j]);
+      }
+    for (int j = 0; j < kLanes; ++j) c[i0 + j] = double(acc[j]) / nn;
   }
   // The minimum over [-radius, radius]; entries ±(radius+1) only serve the fit.
   int best = 1;
@@ -119,14 +142,26 @@ Expected<StereoResult> matchStereo(FeatureSet* left, const FeatureSet& right,
   const double min_d = K.fx * baseline / p.max_depth;
   const double max_d = K.fx * baseline / p.min_depth;
 
-  // Row index: every right keypoint is listed in all rows its band covers.
-  std::vector<std::vector<int>> rows(H);
-  for (int j = 0; j < int(right.size()); ++j) {
-    const Keypoint& k = right.keypoints[j];
+  // Row index: every right keypoint is listed in all rows its band covers, in
+  // one flat array (row y: row_index[row_start[y] .. row_start[y + 1]), j ascending).
+  std::vector<int> row_start(H + 1, 0), row_index;
+  auto bandOf = [&](const Keypoint& k) {
     const double r = p.row_band_px * right.scales[k.octave];
-    const int y0 = std::max(0, int(std::floor(k.v - r)));
-    const int y1 = std::min(H - 1, int(std::ceil(k.v + r)));
-    for (int y = y0; y <= y1; ++y) rows[y].push_back(j);
+    return std::pair<int, int>(std::max(0, int(std::floor(k.v - r))),
+                               std::min(H - 1, int(std::ceil(k.v + r))));
+  };
+  for (const Keypoint& k : right.keypoints) {
+    const auto [y0, y1] = bandOf(k);
+    for (int y = y0; y <= y1; ++y) ++row_start[y + 1];
+  }
+  for (int y = 0; y < H; ++y) row_start[y + 1] += row_start[y];
+  row_index.resize(row_start[H]);
+  {
+    std::vector<int> fill(row_start.begin(), row_start.end() - 1);
+    for (int j = 0; j < int(right.size()); ++j) {
+      const auto [y0, y1] = bandOf(right.keypoints[j]);
+      for (int y = y0; y <= y1; ++y) row_index[fill[y]++] = j;
+    }
   }
 
   StereoResult out;
@@ -134,13 +169,22 @@ Expected<StereoResult> matchStereo(FeatureSet* left, const FeatureSet& right,
   out.u_right.assign(n, -1.f);
   out.disparity.assign(n, 0.f);
   std::vector<double> costs(n, -1.0);
-  for (int i = 0; i < n; ++i) {
+  // Keypoints are visited top to bottom (each is matched on its own, so the
+  // order changes no result): the SAD patches then walk the images row by row
+  // instead of jumping between buckets.
+  std::vector<int> order(n);
+  for (int i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return left->keypoints[a].v < left->keypoints[b].v;
+  });
+  for (int i : order) {
     Keypoint& kl = left->keypoints[i];
     kl.depth = 0.f;
     const int row = int(std::lround(kl.v));
     if (row < 0 || row >= H) continue;
     int best = std::numeric_limits<int>::max(), second = best, best_j = -1;
-    for (int j : rows[row]) {
+    for (int q = row_start[row]; q < row_start[row + 1]; ++q) {
+      const int j = row_index[q];
       const Keypoint& kr = right.keypoints[j];
       if (std::abs(int(kr.octave) - int(kl.octave)) > 1) continue;
       const double d = kl.u - kr.u;

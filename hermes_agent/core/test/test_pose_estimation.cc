@@ -128,6 +128,50 @@ TEST(PoseEstimation, RefinementFromPredictionRejectsOutliers) {
   EXPECT_LT(missed, 5);
 }
 
+TEST(PoseEstimation, RefinementReachesTheCeresOptimumOfTheSameRobustCost) {
+  // One round over every observation (30 % outliers, so the Huber tails matter):
+  // the hand-written Levenberg-Marquardt and Ceres on ReprojectionResidual +
+  // HuberLoss must land on the same minimum.
+  std::mt19937 rng(5);
+  const PinholeIntrinsics K = euroc();
+  for (int trial = 0; trial < 5; ++trial) {
+    const SE3 T_C_W = randomPose(rng, 0.5, 0.5);
+    std::vector<bool> is_out;
+    Correspondences c = makeScene(rng, T_C_W, K, 150, 0.7, 0.3, &is_out);
+    for (std::size_t i = 0; i < c.size(); ++i) c.sigma_px.push_back(i % 3 == 0 ? 1.44 : 1.0);
+    const SE3 init =
+        SE3::exp((Vec6() << 0.03, -0.02, 0.01, 0.01, -0.015, 0.02).finished()) * T_C_W;
+    PoseEstimationParams p;
+    p.refine_rounds = 1;
+    p.iterations_per_round = 100;
+    auto est = refinePose(c, K, init, p);
+    ASSERT_TRUE(est.ok()) << est.error();
+
+    const Quat q0 = init.quat();
+    double qa[4] = {q0.x(), q0.y(), q0.z(), q0.w()};
+    double ta[3] = {init.translation().x(), init.translation().y(), init.translation().z()};
+    ceres::Problem::Options po;
+    po.manifold_ownership = ceres::TAKE_OWNERSHIP;
+    ceres::Problem problem(po);
+    problem.AddParameterBlock(qa, 4, new ceres::EigenQuaternionManifold());
+    problem.AddParameterBlock(ta, 3);
+    for (std::size_t i = 0; i < c.size(); ++i)
+      problem.AddResidualBlock(ReprojectionResidual::create(c.uv[i], c.p_W[i], K, c.sigma_px[i]),
+                               new ceres::HuberLoss(p.huber_px), qa, ta);
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = 100;
+    so.function_tolerance = 1e-12;
+    so.parameter_tolerance = 1e-12;
+    so.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    const SE3 ref(Quat(qa[3], qa[0], qa[1], qa[2]), Vec3(ta[0], ta[1], ta[2]));
+    EXPECT_LT(translationalDistance(est->T_C_W, ref), 1e-6) << "trial " << trial;
+    EXPECT_LT(angularDistance(est->T_C_W, ref), 1e-7) << "trial " << trial;
+  }
+}
+
 TEST(PoseEstimation, BadInputIsAnError) {
   const PinholeIntrinsics K = euroc();
   Correspondences c;

@@ -87,6 +87,61 @@ TEST(StereoMatcher, RefinementRecoversKnownShift) {
   EXPECT_LT(median(err), 0.1);
 }
 
+TEST(StereoMatcher, IntegerSadEqualsTheZeroMeanDefinition) {
+  // The cost is summed in integers; it must equal sum |(l - mean_l) - (r - mean_r)|
+  // over the patch, evaluated here directly in floating point, and the returned
+  // column must be the sub-pixel fit around the reference minimum (shifts whose
+  // reference costs tie are skipped: either is a valid minimum).
+  cv::Mat tex = test::loadSampleGrey("graf1.png");
+  ASSERT_FALSE(tex.empty());
+  auto pair = test::makeFrontoParallelPair(tex, 2.0, 0.110, 458.654);
+  const cv::Mat &L = pair.left, &R = pair.right;
+  auto reference = [&](int xl, int y, int xr, int w) {
+    double ml = 0, mr = 0;
+    for (int dy = -w; dy <= w; ++dy)
+      for (int dx = -w; dx <= w; ++dx) {
+        ml += L.at<uchar>(y + dy, xl + dx);
+        mr += R.at<uchar>(y + dy, xr + dx);
+      }
+    ml /= (2 * w + 1) * (2 * w + 1);
+    mr /= (2 * w + 1) * (2 * w + 1);
+    double sad = 0;
+    for (int dy = -w; dy <= w; ++dy)
+      for (int dx = -w; dx <= w; ++dx)
+        sad += std::abs((L.at<uchar>(y + dy, xl + dx) - ml) - (R.at<uchar>(y + dy, xr + dx) - mr));
+    return sad;
+  };
+  int checked = 0;
+  for (int w : {2, 5}) {
+    const int radius = 4;
+    for (int y = 40; y < 440; y += 23)
+      for (int x = 80; x < 680; x += 37) {
+        const int xr0 = x - int(std::lround(pair.disparity)) + (x + y) % 3 - 1;
+        std::vector<double> c;
+        for (int k = -radius - 1; k <= radius + 1; ++k) c.push_back(reference(x, y, xr0 + k, w));
+        const auto best = std::min_element(c.begin() + 1, c.end() - 1) - c.begin();
+        if (std::count_if(c.begin() + 1, c.end() - 1,
+                          [&](double v) { return std::abs(v - c[best]) < 1e-6; }) > 1)
+          continue;
+        double xr = 0, cost = 0;
+        const bool ok = refineDisparitySad(L, R, x, y, xr0, w, radius, &xr, &cost);
+        if (best == 1 || best == 2 * radius + 1) {
+          EXPECT_FALSE(ok);
+          continue;
+        }
+        const double cm = c[best - 1], c0 = c[best], cp = c[best + 1];
+        const double rise = std::max(cm, cp) - c0;
+        const double delta = rise > 0 ? 0.5 * (cm - cp) / rise : 0.0;
+        ASSERT_EQ(ok, std::abs(delta) <= 1.0) << x << "," << y;
+        if (!ok) continue;
+        EXPECT_NEAR(cost, c0, 1e-6 * std::max(1.0, c0));
+        EXPECT_NEAR(xr, xr0 + (best - radius - 1) + delta, 1e-9);
+        ++checked;
+      }
+  }
+  EXPECT_GT(checked, 300);
+}
+
 TEST(StereoMatcher, RejectsInconsistentInputs) {
   cv::Mat tex = test::loadSampleGrey("graf1.png");
   ASSERT_FALSE(tex.empty());

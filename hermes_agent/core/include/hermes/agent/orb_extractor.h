@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
 
 #include "hermes/core/camera.h"
 #include "hermes/core/config.h"
@@ -64,6 +65,7 @@ class OrbExtractor {
   std::vector<float> scales_;
   std::vector<int> budget_;
   std::vector<int> umax_;  // half-widths of the circular orientation patch per row
+  cv::Ptr<cv::Feature2D> describer_;  // cv::ORB used for rBRIEF only (stateless in compute)
 };
 
 /// Replaces distorted keypoint coordinates by undistorted ones in the pixel frame

@@ -1,6 +1,8 @@
 // Camera pose from 2D-3D correspondences: PnP RANSAC (OpenCV's P3P minimal
 // solver inside RANSAC) for an initial guess, then robust motion-only
-// refinement in Ceres: Huber loss on the reprojection error, observations whose
+// refinement: Levenberg-Marquardt on SE(3) with analytic Jacobians (6 unknowns,
+// so no general solver is needed; the test checks it against a Ceres solve of
+// the same cost), Huber loss on the reprojection error, observations whose
 // error exceeds a chi-square bound are dropped between rounds.
 #pragma once
 
