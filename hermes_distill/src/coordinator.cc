@@ -77,38 +77,90 @@ void predictKept(const Submap& w, int n_kf, int k, double* landmarks, double* ob
   *observations = std::min(lm * track, n_kf * mean_per_kf);
 }
 
+void KeptModel::predict(const Submap& w, int n_kf, int k, double* landmarks,
+                        double* observations) const {
+  predictKept(w, n_kf, k, landmarks, observations);
+  *landmarks *= landmarkRatio();
+  *observations *= observationRatio();
+}
+
+void KeptModel::addSample(const Submap& w, int n_kf, int k, double landmarks, double observations,
+                          bool budget_bound) {
+  double lm0 = 0, obs0 = 0;
+  predictKept(w, n_kf, k, &lm0, &obs0);
+  if (!(lm0 > 0) || !(obs0 > 0) || !(landmarks > 0) || !(observations > 0)) return;
+  // Running mean of the log-ratios, the prior (log 1 = 0) counting as half a
+  // sample; from the 6th sample on a constant gain, so the model follows drift.
+  const double gain = 1.0 / (0.5 + static_cast<double>(std::min<std::size_t>(samples_ + 1, 6)));
+  const double lo = std::log(kMinRatio), hi = std::log(kMaxRatio);
+  const double seen[2] = {std::log(landmarks / lm0), std::log(observations / obs0)};
+  for (int i = 0; i < 2; ++i) {
+    double x = std::clamp(seen[i], lo, hi);
+    if (budget_bound) x = std::max(x, log_ratio_[static_cast<std::size_t>(i)]);  // censored
+    double& r = log_ratio_[static_cast<std::size_t>(i)];
+    r = std::clamp(r + gain * (x - r), lo, hi);
+  }
+  ++samples_;
+}
+
+CoordinatorPlan chooseK(const Submap& trimmed, double budget, const ByteModel& model,
+                        const KeptModel& kept, const DistillParams& params) {
+  CoordinatorPlan plan;
+  plan.n_kf = static_cast<int>(trimmed.keyframes.size());
+  auto bytes = [&](int k) {
+    double lm, obs;
+    kept.predict(trimmed, plan.n_kf, k, &lm, &obs);
+    return model.predict(plan.n_kf, obs, lm);
+  };
+  plan.k = params.k_min;
+  for (double limit : {params.plan_fill * budget, budget}) {
+    int k = params.k_max;
+    while (k > params.k_min && bytes(k) > limit) --k;
+    if (bytes(k) <= limit) {
+      plan.k = k;
+      break;
+    }
+  }
+  plan.predicted_bytes = bytes(plan.k);
+  return plan;
+}
+
 CoordinatorPlan planDistillation(const Submap& w, double budget, const ByteModel& model,
-                                 const DistillParams& params) {
+                                 const KeptModel& kept, const DistillParams& params) {
   CoordinatorPlan plan;
   const int n = static_cast<int>(w.keyframes.size());
   const int n_min = keyframeFloor(w, params);
   const int n_max = std::max(n_min, std::min(n, params.max_keyframes));
   const int k_pref = std::clamp(params.k_pref, params.k_min, params.k_max);
+  const double target = params.plan_fill * budget;
   auto bytes = [&](int nk, int k) {
     double lm, obs;
-    predictKept(w, nk, k, &lm, &obs);
+    kept.predict(w, nk, k, &lm, &obs);
     return model.predict(nk, obs, lm);
   };
-  auto largestK = [&](int nk, int lo, int hi) {  // largest fitting K in [lo, hi], or -1
+  auto largestK = [&](int nk, int lo, int hi, double limit) {  // largest fitting K in [lo, hi], or -1
     for (int k = hi; k >= lo; --k)
-      if (bytes(nk, k) <= budget) return k;
+      if (bytes(nk, k) <= limit) return k;
     return -1;
   };
   // 1) The most keyframes that still carry the preferred K; then the largest K.
   for (int nk = n_max; nk >= n_min; --nk) {
-    if (bytes(nk, k_pref) > budget) continue;
+    if (bytes(nk, k_pref) > target) continue;
     plan.n_kf = nk;
-    plan.k = largestK(nk, k_pref, params.k_max);
+    plan.k = largestK(nk, k_pref, params.k_max, target);
     plan.predicted_bytes = bytes(nk, plan.k);
     return plan;
   }
-  // 2) At the keyframe floor, the largest K down to k_min.
-  const int k = largestK(n_min, params.k_min, k_pref - 1);
-  if (k > 0 && n_min > 0) {
-    plan.n_kf = n_min;
-    plan.k = k;
-    plan.predicted_bytes = bytes(n_min, k);
-    return plan;
+  // 2) At the keyframe floor, the largest K down to k_min: within the target if
+  // possible, else within the budget itself.
+  for (double limit : {target, budget}) {
+    const int k = largestK(n_min, params.k_min, k_pref - 1, limit);
+    if (k > 0 && n_min > 0) {
+      plan.n_kf = n_min;
+      plan.k = k;
+      plan.predicted_bytes = bytes(n_min, k);
+      return plan;
+    }
   }
   plan.defer = true;
   std::ostringstream why;

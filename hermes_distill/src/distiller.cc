@@ -14,8 +14,8 @@ namespace distill {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-// A fitting selection below this fraction of the budget triggers a larger K.
-constexpr double kFillTarget = 0.8;
+// A selection using this much of its landmark byte budget counts as cut by it.
+constexpr double kBudgetBoundFill = 0.95;
 double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -115,7 +115,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   int n_kf = std::min<int>(params_.max_keyframes, static_cast<int>(window.keyframes.size()));
   int k = params_.fixed_k;
   if (budgeted) {
-    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, params_);
+    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, kept_, params_);
     if (plan.defer) {
       rep.deferred = true;
       rep.defer_reason = plan.reason;
@@ -124,6 +124,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     }
     n_kf = plan.n_kf;
     k = plan.k;
+    rep.bytes_planned = plan.predicted_bytes;
   }
 
   auto t0 = Clock::now();
@@ -131,6 +132,11 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   const Submap trimmed = applyKeyframeTrim(window, trim.kept, params_);
   rep.trim_status = toString(trim.status);
   rep.time_trim_ms = msSince(t0);
+  if (budgeted && !trimmed.keyframes.empty()) {  // K for the keyframes really kept
+    const CoordinatorPlan plan = chooseK(trimmed, rep.budget_bytes, model_, kept_, params_);
+    k = plan.k;
+    rep.bytes_planned = plan.predicted_bytes;
+  }
 
   t0 = Clock::now();
   const LandmarkScores scores = computeScores(trimmed, hint, input.loop_closures, params_);
@@ -171,12 +177,16 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     const double bytes = measure(out);
     last_bytes = bytes;
     if (!budgeted) return finish(std::move(out));
+    kept_.addSample(trimmed, static_cast<int>(trimmed.keyframes.size()), k,
+                    static_cast<double>(out.landmarks.size()),
+                    static_cast<double>(out.observationCount()),
+                    sel.support_slack > 0.5 || sel.bytes >= kBudgetBoundFill * prob.budget);
     if (bytes <= rep.budget_bytes) {
       have_fit = true;
       fit = std::move(out);
       fit_report = rep;
       // Fits. If the byte model was pessimistic and K can grow, try a larger K.
-      if (bytes >= kFillTarget * rep.budget_bytes || k >= params_.k_max) break;
+      if (bytes >= params_.fill_accept * rep.budget_bytes || k >= params_.k_max) break;
       k = std::min(params_.k_max,
                    static_cast<int>(std::ceil(k * std::min(2.0, rep.budget_bytes / bytes))));
       continue;
@@ -185,7 +195,9 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     // Too large: shrink K and the landmark budget by the overshoot ratio.
     const double ratio = rep.budget_bytes / bytes;
     const int next_k = static_cast<int>(std::floor(k * ratio * 0.95));
-    s_lm = s_lm - (bytes - rep.budget_bytes) * 1.05;
+    // The margin (1 % of S) keeps a budget-bound selection from overshooting by
+    // a few bytes again when the refitted byte model barely moves.
+    s_lm = s_lm - (bytes - rep.budget_bytes) * 1.05 - 0.01 * rep.budget_bytes;
     if (next_k < params_.k_min || s_lm < 0) {
       floor_hit = true;  // the floor is reached: defer rather than degrade further
       break;

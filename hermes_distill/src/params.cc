@@ -46,6 +46,8 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("k_pref", k_pref)
   HERMES_READ("min_keyframe_rate_hz", min_keyframe_rate_hz)
   HERMES_READ("max_rounds", max_rounds)
+  HERMES_READ("plan_fill", plan_fill)
+  HERMES_READ("fill_accept", fill_accept)
   HERMES_READ("max_keyframes", max_keyframes)
   HERMES_READ("delta", delta)
   HERMES_READ_BOOL("adaptive_weights", adaptive_weights)
@@ -92,6 +94,8 @@ Status DistillParams::validate() const {
   if (k_min < 1 || k_max < k_min) return bad("k_min/k_max need 1 <= k_min <= k_max");
   if (min_keyframe_rate_hz < 0) return bad("min_keyframe_rate_hz must be >= 0");
   if (max_rounds < 1 || max_rounds > 3) return bad("max_rounds must be in [1, 3]");
+  if (!(fill_accept > 0 && fill_accept <= plan_fill && plan_fill <= 1))
+    return bad("plan_fill/fill_accept need 0 < fill_accept <= plan_fill <= 1");
   if (max_keyframes < 2) return bad("max_keyframes must be >= 2");
   if (!(delta > 0)) return bad("delta must be > 0");
   if (alpha < 0 || beta < 0 || alpha + beta <= 0) return bad("alpha, beta must be >= 0, not both 0");
@@ -124,6 +128,8 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "k_pref", k_pref);
   out->set(p + "min_keyframe_rate_hz", min_keyframe_rate_hz);
   out->set(p + "max_rounds", max_rounds);
+  out->set(p + "plan_fill", plan_fill);
+  out->set(p + "fill_accept", fill_accept);
   out->set(p + "max_keyframes", max_keyframes);
   out->set(p + "delta", delta);
   out->set(p + "adaptive_weights", adaptive_weights);

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numeric>
+#include <random>
 
 #include "distill_fixture.h"
 #include "hermes/distill/distiller.h"
@@ -46,6 +48,80 @@ TEST(Coordinator, ByteModelRefitRecoversTheEncoderCoefficients) {
     EXPECT_NEAR(m.predict(kf, obs, lm) / truth(kf, obs, lm), 1.0, 0.03);
   }
   EXPECT_NEAR(m.cObs(), 61, 3);
+}
+
+TEST(Coordinator, KeptModelLearnsTheSelectorsRatiosWithinBounds) {
+  const SyntheticWindow w = testing::window("MH_01_easy", 40.0);
+  const int n_kf = 8, k = 60;
+  double lm0 = 0, obs0 = 0;
+  predictKept(w.submap, n_kf, k, &lm0, &obs0);
+  KeptModel m;
+  double lm = 0, obs = 0;
+  m.predict(w.submap, n_kf, k, &lm, &obs);  // no samples: the structural prior
+  EXPECT_DOUBLE_EQ(lm, lm0);
+  EXPECT_DOUBLE_EQ(obs, obs0);
+  // A selector keeping 0.3x the landmarks and 0.8x the observations, with scatter.
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> jitter(0.9, 1.1);
+  for (int i = 0; i < 12; ++i) m.addSample(w.submap, n_kf, k, 0.3 * lm0 * jitter(rng), 0.8 * obs0 * jitter(rng), false);
+  EXPECT_NEAR(m.landmarkRatio(), 0.3, 0.03);
+  EXPECT_NEAR(m.observationRatio(), 0.8, 0.08);
+  m.predict(w.submap, n_kf, k, &lm, &obs);
+  EXPECT_NEAR(lm / lm0, m.landmarkRatio(), 1e-9);
+  // A budget-cut selection below the estimate is only a lower bound: no change.
+  const double before = m.landmarkRatio();
+  m.addSample(w.submap, n_kf, k, 0.1 * lm0, 0.8 * obs0, true);
+  EXPECT_DOUBLE_EQ(m.landmarkRatio(), before);
+  m.addSample(w.submap, n_kf, k, 0.6 * lm0, 0.8 * obs0, true);  // above it: raises
+  EXPECT_GT(m.landmarkRatio(), before);
+  // Wild samples stay bounded; degenerate ones are ignored.
+  for (int i = 0; i < 30; ++i) m.addSample(w.submap, n_kf, k, 1e6 * lm0, 1e-6 * obs0, false);
+  EXPECT_LE(m.landmarkRatio(), KeptModel::kMaxRatio + 1e-9);
+  EXPECT_GE(m.observationRatio(), KeptModel::kMinRatio - 1e-9);
+  const std::size_t n = m.samples();
+  m.addSample(w.submap, n_kf, k, 0.0, obs0, false);
+  EXPECT_EQ(m.samples(), n);
+}
+
+TEST(Coordinator, LearntKeptRatiosHitTheBudgetInOneRound) {
+  // The MILP keeps far fewer landmarks than the structural estimate; without the
+  // learnt ratios the first round came in low and K was raised for a second solve.
+  DistillParams p;
+  p.k_max = 400;  // the budget, not k_max, bounds K here
+  Distiller d(p, referenceEncodedSize);
+  std::vector<int> rounds;
+  for (double t : {20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0}) {
+    const SyntheticWindow w = testing::window("MH_01_easy", t);
+    CoordinatorInput in;
+    in.bandwidth_Bps = 0.25 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);
+    const DistillResult r = d.distill(w.submap, w.hint, in);
+    ASSERT_FALSE(r.report.deferred) << r.report.defer_reason;
+    EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes) << t;
+    EXPECT_GE(static_cast<double>(r.report.bytes_actual), p.fill_accept * r.report.budget_bytes) << t;
+    rounds.push_back(r.report.rounds);
+  }
+  EXPECT_LT(d.keptModel().landmarkRatio(), 0.9);
+  EXPECT_GT(d.keptModel().samples(), rounds.size() - 1);
+  // Once calibrated (after the first windows), every window takes one round.
+  for (std::size_t i = 3; i < rounds.size(); ++i) EXPECT_EQ(rounds[i], 1) << "window " << i;
+}
+
+TEST(Coordinator, ChooseKFollowsTheKeyframesReallyKept) {
+  const SyntheticWindow w = testing::window("V1_01_easy", 60.0);
+  DistillParams p;
+  const ByteModel model(p);
+  const KeptModel kept;
+  const double budget = 0.3 * static_cast<double>(referenceEncodedSize(w.submap));
+  std::vector<int> all(w.submap.keyframes.size());
+  std::iota(all.begin(), all.end(), 0);
+  const Submap full = applyKeyframeTrim(w.submap, all, p);
+  const Submap half = applyKeyframeTrim(w.submap, {all.front(), all[all.size() / 2], all.back()}, p);
+  const CoordinatorPlan a = chooseK(full, budget, model, kept, p);
+  const CoordinatorPlan b = chooseK(half, budget, model, kept, p);
+  EXPECT_LE(a.predicted_bytes, budget);
+  EXPECT_LE(b.predicted_bytes, budget);
+  EXPECT_GE(b.k, a.k);  // fewer keyframes carry more landmarks each
+  EXPECT_EQ(b.n_kf, 3);
 }
 
 TEST(Coordinator, ShrinksToFitTheBudget) {

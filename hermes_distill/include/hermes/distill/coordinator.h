@@ -5,9 +5,15 @@
 //   bytes ≈ c0 + c_KF·N_KF + c_obs·(kept observations) + c_LM·(kept landmarks)
 // The c· are refitted by ridge-regularised least squares (towards the configured
 // prior, so few samples stay well posed) over the most recent real encodings.
+// The kept landmarks and observations for a given (N_KF, K) come from the
+// window's track statistics (predictKept) times per-strategy ratios that a
+// KeptModel learns online from what the selector really kept: the MILP keeps
+// only what the support demand asks for (long tracks, ~0.3x the structural
+// estimate's landmarks on real windows), the greedy strategies keep more.
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <deque>
 #include <string>
 
@@ -66,12 +72,45 @@ int keyframeFloor(const Submap& window, const DistillParams& params);
 /// N keyframes with K landmarks each, from the window's track statistics.
 void predictKept(const Submap& window, int n_kf, int k, double* landmarks, double* observations);
 
-/// Chooses (N_KF, K) by predicted size: the most keyframes in [floor,
-/// min(max_keyframes, n)] that still fit with K = k_pref, then the largest K up
-/// to k_max at that N_KF; if even the floor cannot carry k_pref, the floor with
-/// the largest K down to k_min. Defers when nothing at or above the floor fits.
+/// What one strategy keeps relative to predictKept: ratios r_lm, r_obs, learnt
+/// from the selections it made (log-ratio running mean, the prior r = 1 weighing
+/// half a sample, forgetting beyond the last 6 samples; each ratio bounded to
+/// [kMinRatio, kMaxRatio]). A selection the byte budget cut short only shows a
+/// lower bound of what the demand asks for, so it can raise a ratio, never lower it.
+class KeptModel {
+ public:
+  static constexpr double kMinRatio = 0.1;
+  static constexpr double kMaxRatio = 3.0;
+
+  /// predictKept(window, n_kf, k) scaled by the learnt ratios.
+  void predict(const Submap& window, int n_kf, int k, double* landmarks, double* observations) const;
+  /// Records what the selector kept from `window` trimmed to n_kf keyframes with
+  /// K = k; budget_bound: the byte budget, not the demand, limited the selection.
+  void addSample(const Submap& window, int n_kf, int k, double landmarks, double observations,
+                 bool budget_bound);
+  double landmarkRatio() const { return std::exp(log_ratio_[0]); }
+  double observationRatio() const { return std::exp(log_ratio_[1]); }
+  std::size_t samples() const { return samples_; }
+
+ private:
+  std::array<double, 2> log_ratio_{0.0, 0.0};  // landmarks, observations
+  std::size_t samples_ = 0;
+};
+
+/// K for a window already trimmed to its keyframes (the trimming may keep fewer
+/// than planned, and the trimmed tracks are what the selector sees): the largest
+/// K in [k_min, k_max] predicted within plan_fill · S, else within S, else k_min
+/// (the selector's hard budget then decides). predicted_bytes is filled.
+CoordinatorPlan chooseK(const Submap& trimmed, double budget, const ByteModel& model,
+                        const KeptModel& kept, const DistillParams& params);
+
+/// Chooses (N_KF, K) so that the predicted size is at most plan_fill · S: the most keyframes in [floor,
+/// min(max_keyframes, n)] that carry K = k_pref, then the largest K up to k_max
+/// at that N_KF; if even the floor cannot carry k_pref, the floor with the
+/// largest K down to k_min (against S itself when plan_fill · S is too little).
+/// Defers when nothing at or above the floor fits S.
 CoordinatorPlan planDistillation(const Submap& window, double budget, const ByteModel& model,
-                                 const DistillParams& params);
+                                 const KeptModel& kept, const DistillParams& params);
 
 }  // namespace distill
 }  // namespace hermes

@@ -6,11 +6,13 @@
 //  * strategy none: raw streaming; the whole window (odometry edges added), no
 //    trimming, no budget (report.over_budget says whether it exceeded S).
 //  * coordinator off: N_KF = max_keyframes, K = fixed_k, no byte budget.
-//  * coordinator on: S from Eq. 17, (N_KF, K) from the byte model, the selector's
-//    hard budget S_LM = S − c0 − c_KF·N_kept; if the real encoded size exceeds S,
-//    K and S_LM shrink by the overshoot ratio and the selection reruns; if it
-//    fits below 80 % of S and K < k_max, K grows by S/size (at most ×2) and the
-//    larger selection is kept if it still fits. At most max_rounds selections;
+//  * coordinator on: S from Eq. 17, (N_KF, K) from the byte model and the kept
+//    model (both learnt from this distiller's earlier rounds; the plan aims at
+//    plan_fill · S), the selector's hard budget S_LM = S − c0 − c_KF·N_kept; if
+//    the real encoded size exceeds S, K and S_LM shrink by the overshoot ratio
+//    and the selection reruns; if it fits below fill_accept · S and K < k_max,
+//    K grows by S/size (at most ×2) and the larger selection is kept if it
+//    still fits. At most max_rounds selections;
 //    if none fits, the least valuable landmarks are dropped until the real size
 //    fits (status suffix "+repaired"); only if that fails is the window deferred.
 #pragma once
@@ -47,6 +49,7 @@ struct DistillReport {
   std::size_t observations = 0;
   int k = 0;                   ///< landmarks per keyframe targeted
   double budget_bytes = 0;     ///< S (infinite with the coordinator off)
+  double bytes_planned = 0;    ///< coordinator's prediction for its (N_KF, K) plan
   double bytes_predicted = 0;  ///< byte model of the sent submap
   std::size_t bytes_actual = 0;  ///< encoder's size (0 without a size function)
   bool over_budget = false;
@@ -76,6 +79,7 @@ class Distiller {
                         const CoordinatorInput& input);
 
   const ByteModel& byteModel() const { return model_; }
+  const KeptModel& keptModel() const { return kept_; }
   const DistillParams& params() const { return params_; }
 
  private:
@@ -83,6 +87,7 @@ class Distiller {
   EncodedSizeFn size_fn_;
   std::unique_ptr<LandmarkSelector> selector_;
   ByteModel model_;
+  KeptModel kept_;
 };
 
 }  // namespace distill

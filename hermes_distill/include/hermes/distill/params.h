@@ -34,6 +34,11 @@
 //   distill.k_pref            K the coordinator keeps before it drops keyframes
 //   distill.min_keyframe_rate_hz   floor: fewer kept keyframes per second -> defer
 //   distill.max_rounds        encode/shrink rounds (<= 3)
+//   distill.plan_fill         fraction of the budget S the planned (N_KF, K) is
+//                             predicted to use [-] (< 1 keeps the selector's hard
+//                             budget from binding as often)
+//   distill.fill_accept       a fitting selection at or above this fraction of S is
+//                             kept; below it (and K < k_max) K grows for another round [-]
 //   distill.odom_sigma_trans, distill.odom_sigma_rot  odometry prior [m], [rad]
 //   distill.odom_shared_ref   shared landmarks at which the prior information applies
 //   distill.bytes_c0, bytes_kf, bytes_obs, bytes_lm   initial byte model [B]
@@ -61,6 +66,8 @@ struct DistillParams {
   int k_pref = 60;
   double min_keyframe_rate_hz = 0.4;
   int max_rounds = 3;
+  double plan_fill = 1.0;
+  double fill_accept = 0.8;
   int max_keyframes = 12;
 
   // Scores.
