@@ -68,6 +68,26 @@ TEST(Trimming, MilpMatchesBruteForce) {
   }
 }
 
+TEST(Trimming, ExhaustedBudgetReturnsTheImprovedPath) {
+  DistillParams params;
+  const Submap w = testing::window("V1_01_easy", 70.0).submap;
+  const int n = static_cast<int>(w.keyframes.size());
+  const int N = std::max(3, n / 2);
+  DistillParams no_time = params;
+  no_time.trim_time_limit_s = 1e-9;  // the deadline passes before the root LP
+  const TrimResult fast = trimKeyframes(w, N, no_time);
+  EXPECT_EQ(fast.status, SolveStatus::kGreedyFallback);
+  ASSERT_FALSE(fast.kept.empty());
+  EXPECT_EQ(fast.kept.front(), 0);
+  EXPECT_EQ(fast.kept.back(), n - 1);
+  EXPECT_LE(static_cast<int>(fast.kept.size()), N);
+  EXPECT_TRUE(connected(w, fast.kept, params.trim_min_shared));
+  params.trim_time_limit_s = 5.0;
+  const TrimResult exact = trimKeyframes(w, N, params);
+  EXPECT_EQ(exact.status, SolveStatus::kOptimal);
+  EXPECT_GE(exact.objective, fast.objective - 1e-9);
+}
+
 TEST(Trimming, UnreachableBudgetKeepsTheShortestConnectedChain) {
   DistillParams params;
   params.trim_min_shared = 1000000;  // only tracker-adjacent keyframes connect

@@ -14,10 +14,13 @@
 // by their count); since the first and last keyframe are always kept, a group seen
 // by <= 2 keyframes has the linear ε = need − Σ y (folded into the y costs) and a
 // group holding both ends is always covered, so only groups of >= 3 keyframes keep
-// a row. CBC solves it warm-started from a
-// dynamic programme (best Σ s_j path with <= N_KF nodes, ignoring coverage); the DP
-// path is also the fallback. If no arc path with <= N_KF keyframes exists, the
-// path with the fewest keyframes is returned (status infeasible_relaxed).
+// a row (groups with the same interior keyframes and need share it). CBC solves it
+// warm-started from a dynamic programme (best Σ s_j path with <= N_KF nodes,
+// ignoring coverage) improved by local search on the full objective; that path is
+// also the fallback (status greedy_fallback when the root LP does not finish in
+// time). trim_time_limit_s bounds the whole call: model, root LP (Clp wall
+// limit) and CBC. If no arc path with <= N_KF keyframes exists, the path with the
+// fewest keyframes is returned (status infeasible_relaxed).
 #pragma once
 
 #include <vector>
