@@ -228,6 +228,13 @@ class AgentNodelet : public nodelet::Nodelet {
     if (!pipeline_) return;
     const double now = ros::WallTime::now().toSec();
     pipeline_->pollUplink(now);
+    // After the sequence no window step runs: a deferred window is retried here.
+    if (done_ && pipeline_->hasCarriedWindow() &&
+        now - last_retry_ >= params_.tracker.window.period_s) {
+      last_retry_ = now;
+      pipeline_->retryCarriedWindow(now);
+      noteSubmitted();
+    }
     if (now - last_heartbeat_ < 1.0) return;
     last_heartbeat_ = now;
     hermes_msgs::AgentHeartbeat hb;
@@ -293,6 +300,7 @@ class AgentNodelet : public nodelet::Nodelet {
   tf2_ros::TransformBroadcaster tf_;
   ros::WallTimer timer_;
   double last_heartbeat_ = 0;
+  double last_retry_ = 0;  ///< wall time of the last retry of a carried window
 };
 
 }  // namespace hermes_agent
