@@ -5,38 +5,11 @@
 #include "frontend_synthetic.h"
 #include "hermes/agent/tracker.h"
 #include "plane_scene.h"
+#include "room_sequence.h"
 
 using namespace hermes;
 
 namespace {
-
-PinholeIntrinsics rectifiedK() {
-  PinholeIntrinsics K;
-  K.fx = K.fy = 436.0;
-  K.cx = 375.5;
-  K.cy = 239.5;
-  K.width = 752;
-  K.height = 480;
-  return K;
-}
-
-/// Ground-truth camera motion: forward drift with a sideways sway and small
-/// yaw / pitch oscillations, sampled at 20 Hz.
-SE3 groundTruth(int k) {
-  const double t = k / 20.0;
-  const Vec3 p(0.4 * std::sin(0.8 * t), 0.05 * std::sin(1.3 * t), 0.25 * t);
-  const Vec3 w(0.03 * std::sin(1.0 * t), 0.1 * std::sin(0.6 * t), 0.0);
-  return SE3(expSO3(w), p);
-}
-
-cv::Mat addNoise(const cv::Mat& img, int seed) {
-  cv::Mat n(img.size(), CV_16S);
-  cv::RNG rng(seed);
-  rng.fill(n, cv::RNG::NORMAL, 0, 2.0);
-  cv::Mat out;
-  cv::add(img, n, out, cv::noArray(), CV_8U);
-  return out;
-}
 
 struct RunStats {
   int frames = 0, lost = 0, keyframes = 0;
@@ -47,21 +20,21 @@ RunStats runSequence(bool stereo, int frames) {
   RunStats st;
   auto scene = test::roomCornerScene();
   if (scene.empty()) return st;
-  const PinholeIntrinsics K = rectifiedK();
+  const PinholeIntrinsics K = test::roomK();
   const double b = 0.11;
   const SE3 T_C_R(Quat::Identity(), Vec3(b, 0, 0));  // right camera b along x
   Tracker tracker(TrackerParams(), K, b);
-  const SE3 T_C0_W = groundTruth(0).inverse();
+  const SE3 T_C0_W = test::roomGroundTruth(0).inverse();
   double sq = 0;
   Vec3 prev = Vec3::Zero();
   for (int k = 0; k < frames; ++k) {
-    const SE3 T_W_C = groundTruth(k);
+    const SE3 T_W_C = test::roomGroundTruth(k);
     CameraFrame f;
     f.stamp = k / 20.0;
     cv::Mat depth;
-    f.left = addNoise(test::renderPlanes(scene, K, T_W_C, &depth), 2 * k);
+    f.left = test::addSensorNoise(test::renderPlanes(scene, K, T_W_C, &depth), 2 * k);
     if (stereo)
-      f.right = addNoise(test::renderPlanes(scene, K, T_W_C * T_C_R), 2 * k + 1);
+      f.right = test::addSensorNoise(test::renderPlanes(scene, K, T_W_C * T_C_R), 2 * k + 1);
     else
       f.depth = depth;
     auto r = tracker.feed(f);
@@ -124,9 +97,9 @@ GapRun runBlankGap(int blank_from, int blank_to, int frames, const TrackerParams
   GapRun out;
   auto scene = test::roomCornerScene();
   if (scene.empty()) return out;
-  const PinholeIntrinsics K = rectifiedK();
+  const PinholeIntrinsics K = test::roomK();
   Tracker tracker(params, K, 0.11);
-  const SE3 T_C0_W = groundTruth(0).inverse();
+  const SE3 T_C0_W = test::roomGroundTruth(0).inverse();
   for (int k = 0; k < frames; ++k) {
     CameraFrame f;
     f.stamp = k / 20.0;
@@ -135,7 +108,7 @@ GapRun runBlankGap(int blank_from, int blank_to, int frames, const TrackerParams
       f.left = cv::Mat(K.height, K.width, CV_8UC1, cv::Scalar(0));
       f.depth = cv::Mat(K.height, K.width, CV_32F, cv::Scalar(0));
     } else {
-      f.left = addNoise(test::renderPlanes(scene, K, groundTruth(k), &f.depth), k);
+      f.left = test::addSensorNoise(test::renderPlanes(scene, K, test::roomGroundTruth(k), &f.depth), k);
     }
     auto r = tracker.feed(f);
     EXPECT_TRUE(r.ok()) << r.error();
@@ -145,7 +118,7 @@ GapRun runBlankGap(int blank_from, int blank_to, int frames, const TrackerParams
       EXPECT_FALSE(r->new_keyframe);
     }
     if (r->status == TrackingStatus::kOk)
-      out.err_last = (r->T_W_C.translation() - (T_C0_W * groundTruth(k)).translation()).norm();
+      out.err_last = (r->T_W_C.translation() - (T_C0_W * test::roomGroundTruth(k)).translation()).norm();
   }
   return out;
 }
@@ -188,7 +161,7 @@ TEST(Tracker, RelocalisesByDescriptorAfterALongGap) {
 }
 
 TEST(Tracker, MalformedFramesAreErrors) {
-  Tracker tracker(TrackerParams(), rectifiedK(), 0.11);
+  Tracker tracker(TrackerParams(), test::roomK(), 0.11);
   CameraFrame f;
   EXPECT_FALSE(tracker.feed(f).ok());
   f.left = cv::Mat(480, 752, CV_8UC1, cv::Scalar(0));

@@ -23,8 +23,7 @@ SE3 roomGroundTruth(int k) {
   return SE3(expSO3(w), p);
 }
 
-namespace {
-cv::Mat noisy(const cv::Mat& img, int seed) {
+cv::Mat addSensorNoise(const cv::Mat& img, int seed) {
   cv::Mat n(img.size(), CV_16S);
   cv::RNG rng(seed);
   rng.fill(n, cv::RNG::NORMAL, 0, 2.0);
@@ -32,7 +31,6 @@ cv::Mat noisy(const cv::Mat& img, int seed) {
   cv::add(img, n, out, cv::noArray(), CV_8U);
   return out;
 }
-}  // namespace
 
 RoomRunStats runRoomSequence(Tracker* tracker, bool stereo, int frames,
                              const std::function<void(double, const TrackResult&)>& after) {
@@ -49,9 +47,9 @@ RoomRunStats runRoomSequence(Tracker* tracker, bool stereo, int frames,
     CameraFrame f;
     f.stamp = k / 20.0;
     cv::Mat depth;
-    f.left = noisy(renderPlanes(scene, K, T_W_C, &depth), 2 * k);
+    f.left = addSensorNoise(renderPlanes(scene, K, T_W_C, &depth), 2 * k);
     if (stereo)
-      f.right = noisy(renderPlanes(scene, K, T_W_C * T_C_R), 2 * k + 1);
+      f.right = addSensorNoise(renderPlanes(scene, K, T_W_C * T_C_R), 2 * k + 1);
     else
       f.depth = depth;
     auto r = tracker->feed(f);

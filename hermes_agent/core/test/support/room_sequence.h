@@ -4,6 +4,8 @@
 
 #include <functional>
 
+#include <opencv2/core.hpp>
+
 #include "hermes/agent/tracker.h"
 
 namespace hermes::test {
@@ -12,6 +14,9 @@ PinholeIntrinsics roomK();
 
 /// Ground-truth camera pose (W <- C) of frame k at 20 Hz.
 SE3 roomGroundTruth(int k);
+
+/// `img` plus Gaussian sensor noise (sigma 2 grey levels), seeded.
+cv::Mat addSensorNoise(const cv::Mat& img, int seed);
 
 struct RoomRunStats {
   int frames = 0, lost = 0, keyframes = 0;
