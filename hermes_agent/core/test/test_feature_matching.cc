@@ -5,20 +5,11 @@
 #include "hermes/agent/feature_matching.h"
 #include "hermes/agent/pose_estimation.h"
 
+#include "frontend_synthetic.h"
+
 using namespace hermes;
 
 namespace {
-
-PinholeIntrinsics euroc() {
-  PinholeIntrinsics K;
-  K.fx = 458.654;
-  K.fy = 457.296;
-  K.cx = 367.215;
-  K.cy = 248.375;
-  K.width = 752;
-  K.height = 480;
-  return K;
-}
 
 Descriptor randomDescriptor(std::mt19937& rng) {
   Descriptor d;
@@ -111,7 +102,7 @@ TEST(FeatureMatching, GridQueryEqualsBruteForce) {
 
 TEST(FeatureMatching, ProjectionMatchingThenPose) {
   std::mt19937 rng(9);
-  const PinholeIntrinsics K = euroc();
+  const PinholeIntrinsics K = test::eurocCam0();
   const SE3 T_C_W(expSO3(Vec3(0.1, -0.2, 0.05)), Vec3(0.3, -0.1, 0.5));
   Scene s = makeScene(rng, T_C_W, K, 600);
   // Predicted pose a few pixels off (as from a constant-velocity model).
@@ -143,7 +134,7 @@ TEST(FeatureMatching, ProjectionMatchingThenPose) {
 
 TEST(FeatureMatching, OrientationConsistencyDropsOddRotations) {
   std::mt19937 rng(13);
-  const PinholeIntrinsics K = euroc();
+  const PinholeIntrinsics K = test::eurocCam0();
   const SE3 T_C_W;
   Scene s = makeScene(rng, T_C_W, K, 300);
   // A tenth of the true matches get an inconsistent orientation change.

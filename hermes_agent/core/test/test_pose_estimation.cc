@@ -5,20 +5,11 @@
 
 #include "hermes/agent/pose_estimation.h"
 
+#include "frontend_synthetic.h"
+
 using namespace hermes;
 
 namespace {
-
-PinholeIntrinsics euroc() {
-  PinholeIntrinsics K;
-  K.fx = 458.654;
-  K.fy = 457.296;
-  K.cx = 367.215;
-  K.cy = 248.375;
-  K.width = 752;
-  K.height = 480;
-  return K;
-}
 
 SE3 randomPose(std::mt19937& rng, double max_angle, double max_t) {
   std::uniform_real_distribution<double> u(-1, 1);
@@ -53,7 +44,7 @@ Correspondences makeScene(std::mt19937& rng, const SE3& T_C_W, const PinholeIntr
 
 TEST(PoseEstimation, AutodiffJacobianMatchesCentralDifferences) {
   std::mt19937 rng(3);
-  const PinholeIntrinsics K = euroc();
+  const PinholeIntrinsics K = test::eurocCam0();
   for (int trial = 0; trial < 20; ++trial) {
     const SE3 T = randomPose(rng, 0.5, 0.3);
     const Vec3 p_W = T.inverse() * Vec3(0.3 * trial / 20.0 - 0.1, -0.2, 2.0 + 0.1 * trial);
@@ -91,7 +82,7 @@ TEST(PoseEstimation, AutodiffJacobianMatchesCentralDifferences) {
 
 TEST(PoseEstimation, PnpRansacAndRefinementWithOutliers) {
   std::mt19937 rng(7);
-  const PinholeIntrinsics K = euroc();
+  const PinholeIntrinsics K = test::eurocCam0();
   double worst_t = 0, worst_r = 0;
   for (int trial = 0; trial < 5; ++trial) {
     const SE3 T_C_W = randomPose(rng, 0.6, 1.0);
@@ -113,7 +104,7 @@ TEST(PoseEstimation, PnpRansacAndRefinementWithOutliers) {
 
 TEST(PoseEstimation, RefinementFromPredictionRejectsOutliers) {
   std::mt19937 rng(11);
-  const PinholeIntrinsics K = euroc();
+  const PinholeIntrinsics K = test::eurocCam0();
   const SE3 T_C_W = randomPose(rng, 0.4, 0.5);
   std::vector<bool> is_out;
   Correspondences c = makeScene(rng, T_C_W, K, 200, 0.5, 0.3, &is_out);
@@ -133,7 +124,7 @@ TEST(PoseEstimation, RefinementReachesTheCeresOptimumOfTheSameRobustCost) {
   // the hand-written Levenberg-Marquardt and Ceres on ReprojectionResidual +
   // HuberLoss must land on the same minimum.
   std::mt19937 rng(5);
-  const PinholeIntrinsics K = euroc();
+  const PinholeIntrinsics K = test::eurocCam0();
   for (int trial = 0; trial < 5; ++trial) {
     const SE3 T_C_W = randomPose(rng, 0.5, 0.5);
     std::vector<bool> is_out;
@@ -173,7 +164,7 @@ TEST(PoseEstimation, RefinementReachesTheCeresOptimumOfTheSameRobustCost) {
 }
 
 TEST(PoseEstimation, BadInputIsAnError) {
-  const PinholeIntrinsics K = euroc();
+  const PinholeIntrinsics K = test::eurocCam0();
   Correspondences c;
   EXPECT_FALSE(estimatePose(c, K, PoseEstimationParams()).ok());
   std::mt19937 rng(1);
