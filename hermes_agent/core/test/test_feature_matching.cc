@@ -5,7 +5,7 @@
 #include "hermes/agent/feature_matching.h"
 #include "hermes/agent/pose_estimation.h"
 
-#include "frontend_synthetic.h"
+#include "hermes/distill/synthetic_window.h"
 
 using namespace hermes;
 
@@ -102,7 +102,7 @@ TEST(FeatureMatching, GridQueryEqualsBruteForce) {
 
 TEST(FeatureMatching, ProjectionMatchingThenPose) {
   std::mt19937 rng(9);
-  const PinholeIntrinsics K = test::eurocCam0();
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
   const SE3 T_C_W(expSO3(Vec3(0.1, -0.2, 0.05)), Vec3(0.3, -0.1, 0.5));
   Scene s = makeScene(rng, T_C_W, K, 600);
   // Predicted pose a few pixels off (as from a constant-velocity model).
@@ -134,7 +134,7 @@ TEST(FeatureMatching, ProjectionMatchingThenPose) {
 
 TEST(FeatureMatching, OrientationConsistencyDropsOddRotations) {
   std::mt19937 rng(13);
-  const PinholeIntrinsics K = test::eurocCam0();
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
   const SE3 T_C_W;
   Scene s = makeScene(rng, T_C_W, K, 300);
   // A tenth of the true matches get an inconsistent orientation change.

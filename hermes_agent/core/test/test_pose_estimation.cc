@@ -5,7 +5,7 @@
 
 #include "hermes/agent/pose_estimation.h"
 
-#include "frontend_synthetic.h"
+#include "hermes/distill/synthetic_window.h"
 
 using namespace hermes;
 
@@ -44,7 +44,7 @@ Correspondences makeScene(std::mt19937& rng, const SE3& T_C_W, const PinholeIntr
 
 TEST(PoseEstimation, AutodiffJacobianMatchesCentralDifferences) {
   std::mt19937 rng(3);
-  const PinholeIntrinsics K = test::eurocCam0();
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
   for (int trial = 0; trial < 20; ++trial) {
     const SE3 T = randomPose(rng, 0.5, 0.3);
     const Vec3 p_W = T.inverse() * Vec3(0.3 * trial / 20.0 - 0.1, -0.2, 2.0 + 0.1 * trial);
@@ -82,7 +82,7 @@ TEST(PoseEstimation, AutodiffJacobianMatchesCentralDifferences) {
 
 TEST(PoseEstimation, PnpRansacAndRefinementWithOutliers) {
   std::mt19937 rng(7);
-  const PinholeIntrinsics K = test::eurocCam0();
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
   double worst_t = 0, worst_r = 0;
   for (int trial = 0; trial < 5; ++trial) {
     const SE3 T_C_W = randomPose(rng, 0.6, 1.0);
@@ -104,7 +104,7 @@ TEST(PoseEstimation, PnpRansacAndRefinementWithOutliers) {
 
 TEST(PoseEstimation, RefinementFromPredictionRejectsOutliers) {
   std::mt19937 rng(11);
-  const PinholeIntrinsics K = test::eurocCam0();
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
   const SE3 T_C_W = randomPose(rng, 0.4, 0.5);
   std::vector<bool> is_out;
   Correspondences c = makeScene(rng, T_C_W, K, 200, 0.5, 0.3, &is_out);
@@ -124,7 +124,7 @@ TEST(PoseEstimation, RefinementReachesTheCeresOptimumOfTheSameRobustCost) {
   // the hand-written Levenberg-Marquardt and Ceres on ReprojectionResidual +
   // HuberLoss must land on the same minimum.
   std::mt19937 rng(5);
-  const PinholeIntrinsics K = test::eurocCam0();
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
   for (int trial = 0; trial < 5; ++trial) {
     const SE3 T_C_W = randomPose(rng, 0.5, 0.5);
     std::vector<bool> is_out;
@@ -164,7 +164,7 @@ TEST(PoseEstimation, RefinementReachesTheCeresOptimumOfTheSameRobustCost) {
 }
 
 TEST(PoseEstimation, BadInputIsAnError) {
-  const PinholeIntrinsics K = test::eurocCam0();
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
   Correspondences c;
   EXPECT_FALSE(estimatePose(c, K, PoseEstimationParams()).ok());
   std::mt19937 rng(1);

@@ -5,17 +5,6 @@
 
 namespace hermes::test {
 
-PinholeIntrinsics eurocCam0() {
-  PinholeIntrinsics K;
-  K.fx = 458.654;
-  K.fy = 457.296;
-  K.cx = 367.215;
-  K.cy = 248.375;
-  K.width = 752;
-  K.height = 480;
-  return K;
-}
-
 std::string opencvSampleDir() { return "/usr/share/doc/opencv-doc/examples/data"; }
 
 cv::Mat loadSampleGrey(const std::string& name) {

@@ -10,9 +10,6 @@
 
 namespace hermes::test {
 
-/// EuRoC cam0 intrinsics (752x480, unrectified pinhole part).
-PinholeIntrinsics eurocCam0();
-
 /// Directory of the opencv-doc sample images.
 std::string opencvSampleDir();
 
