@@ -44,6 +44,7 @@
 #include "hermes/agent/tracker.h"
 #include "hermes/core/evaluation.h"
 #include "hermes/core/metrics.h"
+#include "hermes/core/render_cache.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/distill/distiller.h"
 #include "hermes/distill/keyframe_trimming.h"
@@ -95,22 +96,14 @@ nlohmann::json summary(const std::vector<double>& v) {
 /// Renders the trajectories (config/trajectories/<name>.txt) into one hall under
 /// `data` unless a finished rendering is cached there.
 bool renderHall(const fs::path& data, const std::vector<std::string>& names, double duration) {
-  if (fs::exists(data / "done")) return true;
-  std::fprintf(stderr, "[mapuse] rendering %zu trajectories (%g s) into %s\n", names.size(), duration,
-               data.c_str());
-  fs::remove_all(data);
-  const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path();
-  std::string cmd = (bin / "hermes_sim").string();
+  RenderRequest req;
   for (const std::string& n : names)
-    cmd += std::string(" --trajectory ") + HERMES_SOURCE_DIR + "/config/trajectories/" + n + ".txt";
-  char tail[512];
-  std::snprintf(tail, sizeof tail, " --out %s --duration %g --seed 1 >/dev/null 2>&1", data.c_str(), duration);
-  cmd += tail;
-  if (std::system(cmd.c_str()) != 0) {
-    std::fprintf(stderr, "rendering failed: %s\n", cmd.c_str());
+    req.trajectories.push_back(std::string(HERMES_SOURCE_DIR) + "/config/trajectories/" + n + ".txt");
+  req.duration_s = duration;
+  if (Status s = renderCached(req, data.string()); !s) {
+    std::fprintf(stderr, "[mapuse] %s\n", s.error().c_str());
     return false;
   }
-  std::ofstream(data / "done") << "ok\n";
   return true;
 }
 

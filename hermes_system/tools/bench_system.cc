@@ -26,6 +26,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "hermes/core/render_cache.h"
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
 
@@ -103,21 +104,14 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
     std::snprintf(key, sizeof key, "d%g_r%g_s%g", duration, rate, start);
   else
     std::snprintf(key, sizeof key, "d%g_r%g", duration, rate);
-  const fs::path data = fs::path(cache) / key;
-  if (fs::exists(data / "done")) return data;
-  std::fprintf(stderr, "[bench system] rendering 3 robots x %g s (from %g s) at %g Hz into %s\n",
-               duration, start, rate, data.c_str());
-  fs::remove_all(data);
-  const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path();
-  std::string cmd = (bin / "hermes_sim").string();
+  RenderRequest req;
   for (const char* s : kSeqs)
-    cmd += std::string(" --trajectory ") + HERMES_SOURCE_DIR + "/config/trajectories/" + s + ".txt";
-  char tail[200];
-  std::snprintf(tail, sizeof tail, " --start %g --duration %g --rate %g --seed 1 >/dev/null 2>&1",
-                start, duration, rate);
-  cmd += " --out " + data.string() + tail;
-  if (std::system(cmd.c_str()) != 0) return Error{"rendering failed (" + cmd + ")"};
-  std::ofstream(data / "done") << "ok\n";
+    req.trajectories.push_back(std::string(HERMES_SOURCE_DIR) + "/config/trajectories/" + s + ".txt");
+  req.start_s = start;
+  req.duration_s = duration;
+  req.rate_hz = rate;
+  const fs::path data = fs::path(cache) / key;
+  if (Status s = hermes::renderCached(req, data.string()); !s) return Error{s.error()};
   return data;
 }
 

@@ -8,18 +8,16 @@
 
 #include <chrono>
 #include <cstdio>
-#include <cstdlib>
 #include <ctime>
-#include <filesystem>
 #include <string>
 #include <vector>
 
-#include <unistd.h>
 
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/agent/tracker.h"
 #include "hermes/core/dataset.h"
 #include "hermes/core/evaluation.h"
+#include "hermes/core/render_cache.h"
 
 namespace hermes::bench {
 
@@ -45,47 +43,18 @@ struct RenderSpec {
   }
 };
 
-/// hermes_sim beside the running binary (both live in <build>/bin).
-inline std::string simBinary() {
-  std::error_code ec;
-  const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);
-  return (self.parent_path() / "hermes_sim").string();
-}
-
 /// Dataset folder of `spec` under `cache_root`, rendering it first when absent.
-/// Renders into a private folder that is renamed when complete, so an
-/// interrupted render is never taken for a cached one.
 inline Expected<std::string> renderCached(const RenderSpec& spec, const std::string& cache_root,
                                           const std::string& trajectories_dir) {
-  namespace fs = std::filesystem;
-  const fs::path done = fs::path(cache_root) / spec.key();
-  const std::string dataset = (done / spec.stem).string();
-  if (fs::is_directory(done)) return dataset;
-  const std::string sim = simBinary();
-  if (!fs::exists(sim)) return Error{"hermes_sim not found at " + sim + " (build target hermes_sim)"};
-  const std::string traj = trajectories_dir + "/" + spec.stem + ".txt";
-  if (!fs::exists(traj)) return Error{"trajectory not found: " + traj};
-  std::error_code ec;
-  fs::create_directories(cache_root, ec);
-  const fs::path partial = done.string() + ".partial." + std::to_string(::getpid());
-  const std::string log = done.string() + ".log";
-  char args[512];
-  std::snprintf(args, sizeof args, " --start %g --duration %g --seed %d --poor-fraction %g",
-                spec.start_s, spec.duration_s, spec.seed, spec.poor_fraction);
-  const std::string cmd = "'" + sim + "' --trajectory '" + traj + "' --out '" + partial.string() +
-                          "'" + args + " >'" + log + "' 2>&1";
-  std::fprintf(stderr, "[bench frontend] rendering %s into %s (log %s)\n", spec.describe().c_str(),
-               done.c_str(), log.c_str());
-  if (std::system(cmd.c_str()) != 0) {
-    fs::remove_all(partial, ec);
-    return Error{"hermes_sim failed for " + spec.describe() + " (see " + log + ")"};
-  }
-  fs::rename(partial, done, ec);
-  if (ec) {  // another run finished the same render first: use that one
-    fs::remove_all(partial, ec);
-    if (!fs::is_directory(done)) return Error{"cannot move the render to " + done.string()};
-  }
-  return dataset;
+  RenderRequest req;
+  req.trajectories = {trajectories_dir + "/" + spec.stem + ".txt"};
+  req.start_s = spec.start_s;
+  req.duration_s = spec.duration_s;
+  req.seed = spec.seed;
+  req.poor_fraction = spec.poor_fraction;
+  const std::string folder = cache_root + "/" + spec.key();
+  if (Status s = hermes::renderCached(req, folder); !s) return Error{s.error()};
+  return folder + "/" + spec.stem;
 }
 
 /// Everything one tracked sequence yields.

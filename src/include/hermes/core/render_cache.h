@@ -1,0 +1,27 @@
+// Rendered datasets for benchmarks, made once: runs hermes_sim (found beside
+// the running tool, both live in <build>/bin) into a private folder that is
+// renamed when complete, so an interrupted render is never taken for a cached
+// one. A folder holding a `done` marker counts as cached.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "hermes/core/status.h"
+
+namespace hermes {
+
+struct RenderRequest {
+  std::vector<std::string> trajectories;  ///< TUM trajectory files, one robot each (one hall)
+  double start_s = 0;                     ///< hermes_sim --start
+  double duration_s = 0;                  ///< hermes_sim --duration (0: whole trajectories)
+  double rate_hz = 0;                     ///< hermes_sim --rate (0: its default)
+  int seed = 1;                           ///< hermes_sim --seed
+  double poor_fraction = -1;              ///< hermes_sim --poor-fraction (< 0: its default)
+};
+
+/// `folder`, rendering `req` into it first unless a finished render is there.
+/// The render's output goes to `folder`.log. Errors name the failing command.
+Status renderCached(const RenderRequest& req, const std::string& folder);
+
+}  // namespace hermes
