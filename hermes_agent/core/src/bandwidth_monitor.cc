@@ -92,8 +92,9 @@ const BandwidthMonitor::Outstanding* BandwidthMonitor::oldestOutstanding() const
   return oldest;
 }
 
-bool BandwidthMonitor::outage(double t) const {
-  const Outstanding* oldest = oldestOutstanding();
+bool BandwidthMonitor::outage(double t) const { return outage(t, oldestOutstanding()); }
+
+bool BandwidthMonitor::outage(double t, const Outstanding* oldest) const {
   if (!oldest) return false;
   // The next ack is due one transfer time of the oldest outstanding message
   // after the link last made progress; silence beyond that + T_out is an outage.
@@ -115,13 +116,14 @@ double BandwidthMonitor::sampledRate(double t) const {
 }
 
 double BandwidthMonitor::estimate(double t) const {
-  if (outage(t)) return 0.0;
+  const Outstanding* oldest = oldestOutstanding();
+  if (outage(t, oldest)) return 0.0;
   double rate = sampledRate(t);
   // The oldest unacknowledged message has been in transfer since max(sent,
   // last ack); once clearly overdue at `rate` (twice its transfer time plus the
   // ack latency: queueing alone can delay it past once), the link cannot
   // be carrying more than its bytes over that time.
-  if (const Outstanding* oldest = oldestOutstanding(); oldest && rate > 0) {
+  if (oldest && rate > 0) {
     const double since = std::max(oldest->sent, last_ack_);
     const double bytes = static_cast<double>(oldest->bytes);
     const double elapsed = t - since;

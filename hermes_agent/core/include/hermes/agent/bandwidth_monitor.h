@@ -72,6 +72,7 @@ class BandwidthMonitor {
     double start, ack, bytes;
   };
   const Outstanding* oldestOutstanding() const;
+  bool outage(double t, const Outstanding* oldest) const;
   /// Max-filtered / decayed rate from the samples alone (no outage, no bound).
   double sampledRate(double t) const;
   BandwidthMonitorParams p_;
