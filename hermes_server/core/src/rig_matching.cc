@@ -24,6 +24,44 @@ inline int hamming(const Packed& a, const Packed& b) {
          __builtin_popcountll(a[2] ^ b[2]) + __builtin_popcountll(a[3] ^ b[3]);
 }
 
+constexpr int kInf = std::numeric_limits<int>::max();
+
+/// Brute force between two cameras: per row of `a` its best and second-best
+/// distance (and best index), per column of `b` its best row. Cloned for POPCNT
+/// (baseline x86-64 builds would call libgcc's table popcount instead).
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target_clones("popcnt", "default")))
+#endif
+void bestTwo(const std::vector<Packed>& a, const std::vector<Packed>& b, std::vector<int>* best,
+             std::vector<int>* second, std::vector<int>* best_idx, std::vector<int>* col_best,
+             std::vector<int>* col_idx) {
+  best->assign(a.size(), kInf);
+  second->assign(a.size(), kInf);
+  best_idx->assign(a.size(), -1);
+  col_best->assign(b.size(), kInf);
+  col_idx->assign(b.size(), -1);
+  for (std::size_t p = 0; p < a.size(); ++p) {
+    int b1 = kInf, b2 = kInf, i1 = -1;
+    for (std::size_t q = 0; q < b.size(); ++q) {
+      const int d = hamming(a[p], b[q]);
+      if (d < b1) {
+        b2 = b1;
+        b1 = d;
+        i1 = static_cast<int>(q);
+      } else if (d < b2) {
+        b2 = d;
+      }
+      if (d < (*col_best)[q]) {
+        (*col_best)[q] = d;
+        (*col_idx)[q] = static_cast<int>(p);
+      }
+    }
+    (*best)[p] = b1;
+    (*second)[p] = b2;
+    (*best_idx)[p] = i1;
+  }
+}
+
 Status checkKeyframe(const Keyframe& kf, const std::vector<PinholeIntrinsics>& cameras) {
   const std::string where = "keyframe " + std::to_string(kf.id);
   if (kf.camera_id >= cameras.size()) {
@@ -97,30 +135,13 @@ std::vector<RigMatch> matchRigs(const Rig& query, const Rig& candidate,
   std::vector<std::vector<std::vector<RigMatch>>> per_kp(dq.size());
   for (std::size_t i = 0; i < dq.size(); ++i) per_kp[i].resize(dq[i].size());
 
-  constexpr int kInf = std::numeric_limits<int>::max();
   for (std::size_t i = 0; i < dq.size(); ++i) {
     for (std::size_t j = 0; j < dc.size(); ++j) {
       const auto& a = dq[i];
       const auto& b = dc[j];
       if (a.empty() || b.empty()) continue;
-      std::vector<int> best(a.size(), kInf), second(a.size(), kInf), best_idx(a.size(), -1);
-      std::vector<int> col_best(b.size(), kInf), col_idx(b.size(), -1);
-      for (std::size_t p = 0; p < a.size(); ++p) {
-        for (std::size_t q = 0; q < b.size(); ++q) {
-          const int d = hamming(a[p], b[q]);
-          if (d < best[p]) {
-            second[p] = best[p];
-            best[p] = d;
-            best_idx[p] = static_cast<int>(q);
-          } else if (d < second[p]) {
-            second[p] = d;
-          }
-          if (d < col_best[q]) {
-            col_best[q] = d;
-            col_idx[q] = static_cast<int>(p);
-          }
-        }
-      }
+      std::vector<int> best, second, best_idx, col_best, col_idx;
+      bestTwo(a, b, &best, &second, &best_idx, &col_best, &col_idx);
       for (std::size_t p = 0; p < a.size(); ++p) {
         if (best_idx[p] < 0 || best[p] > params.max_hamming) continue;
         if (second[p] != kInf && best[p] >= params.ratio * second[p]) continue;
