@@ -24,6 +24,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 #include <nlohmann/json.hpp>
 
 #include "hermes/core/render_cache.h"
@@ -37,7 +39,8 @@ namespace {
 
 const char* kUsage =
     "usage: hermes_bench_system [--duration S] [--rate HZ] [--cache DIR]\n"
-    "                           [--bandwidths LIST] [--variants LIST] [--json FILE]\n"
+    "                           [--bandwidths LIST] [--variants LIST] [--set KEY=VALUE]...\n"
+    "                           [--json FILE]\n"
     "  --duration S     seconds rendered per robot (default 15)\n"
     "  --rate HZ        camera rate (default 20)\n"
     "  --cache DIR      rendered data cache (default data_cache/bench_system)\n"
@@ -45,6 +48,8 @@ const char* kUsage =
     "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility,false_candidates\n"
     "                   (default: all; the last three only at the two lowest bandwidths,\n"
     "                   false_candidates only unlimited)\n"
+    "  --set KEY=VALUE  configuration override for every run (repeatable; e.g.\n"
+    "                   distill.k_max=300); the variant's own settings win\n"
     "  --swarm L        instead: swarm sizes (e.g. 2,4,6,8,10; at most 12) sharing one\n"
     "                   --swarm-bandwidth link (default 50 Mbit/s, paper Fig. 18); robots\n"
     "                   are the hall's trajectories from 0, 20, 40, 60 s; variants\n"
@@ -130,8 +135,10 @@ Expected<Robots> swarmRobots(const std::string& cache, double duration, double r
 }
 
 /// One offline run of `variant` with all `robots` sharing a `bw` Mbit/s link.
-Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw, const Robots& robots) {
-  std::vector<std::string> sets = variantSets(v);
+Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw, const Robots& robots,
+                                    const std::vector<std::string>& overrides) {
+  std::vector<std::string> sets = overrides;
+  for (const std::string& s : variantSets(v)) sets.push_back(s);
   sets.push_back("link.bandwidth_mbitps=" + bw);
   sets.push_back("uplink.buffer.fsync=false");
   auto config = agent::loadRunConfig("", sets);
@@ -144,7 +151,9 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
     if (!ds.ok()) return Error{ds.error()};
     sources.push_back({name, std::move(*ds), 0});
   }
-  const std::string spool = (fs::temp_directory_path() / "hermes_bench_system_spool").string();
+  // One spool per process: two benchmarks may run side by side.
+  const std::string spool =
+      (fs::temp_directory_path() / ("hermes_bench_system_spool_" + std::to_string(::getpid()))).string();
   auto run = system::OfflineRun::create(*params, std::move(sources), spool, HERMES_SOURCE_DIR);
   if (!run.ok()) return Error{run.error()};
   std::size_t injected = 0;
@@ -165,6 +174,9 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   for (const AgentMetrics& a : r.metrics.per_agent)
     if (a.lost_rate) lost += *a.lost_rate, ++n;
   j["tracking_lost_rate_mean"] = n ? lost / n : 0.0;
+  run->reset();
+  std::error_code ec;
+  fs::remove_all(spool, ec);  // the run's own files, not results
   return j;
 }
 
@@ -198,6 +210,7 @@ int main(int argc, char** argv) {
   std::string json_out;
   std::vector<std::string> swarm;
   std::string swarm_bw = "50";
+  std::vector<std::string> overrides;
   bool variants_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -226,6 +239,8 @@ int main(int argc, char** argv) {
       swarm = split(next());
     } else if (a == "--swarm-bandwidth") {
       swarm_bw = next();
+    } else if (a == "--set") {
+      overrides.push_back(next());
     } else if (a == "--json") {
       json_out = next();
     } else {
@@ -257,14 +272,15 @@ int main(int argc, char** argv) {
       auto robots = swarmRobots(cache, duration, rate, std::atoi(n.c_str()));
       if (!robots.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", robots.error().c_str()), 1;
       for (const std::string& v : variants) {
-        auto j = runVariant(v, swarm_bw, *robots);
+        auto j = runVariant(v, swarm_bw, *robots, overrides);
         if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
         printRow(v, swarm_bw, *j);
         runs.push_back(*j);
       }
     }
     return writeJson({{"bench", "system_swarm"}, {"duration_s", duration}, {"rate_hz", rate},
-                      {"bandwidth_mbitps", std::atof(swarm_bw.c_str())}, {"runs", runs}},
+                      {"bandwidth_mbitps", std::atof(swarm_bw.c_str())}, {"overrides", overrides},
+                      {"runs", runs}},
                      json_out);
   }
 
@@ -290,7 +306,7 @@ int main(int argc, char** argv) {
     for (const std::string& bw : bandwidths) {
       if (ablation && std::find(low.begin(), low.end(), bw) == low.end()) continue;
       if (v == "false_candidates" && std::atof(bw.c_str()) > 0) continue;
-      auto j = runVariant(v, bw, robots);
+      auto j = runVariant(v, bw, robots, overrides);
       if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
       printRow(v, bw, *j);
       runs.push_back(*j);
@@ -300,6 +316,7 @@ int main(int argc, char** argv) {
                     {"data", data->string()},
                     {"duration_s", duration},
                     {"rate_hz", rate},
+                    {"overrides", overrides},
                     {"runs", runs}},
                    json_out);
 }
