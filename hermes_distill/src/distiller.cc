@@ -7,6 +7,7 @@
 #include <numeric>
 #include <sstream>
 
+#include "hermes/distill/keyframe_trimming.h"
 #include "hermes/distill/selectors.h"
 
 namespace hermes {
@@ -153,6 +154,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   std::vector<int> last_selected;
   double last_bytes = 0;
   Submap fit;
+  std::vector<int> fit_selected;
   DistillReport fit_report;
   for (int round = 1; round <= params_.max_rounds; ++round) {
     rep.rounds = round;
@@ -172,7 +174,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     rep.greedy_objective = sel.greedy_objective;
     rep.support_slack = sel.support_slack;
     rep.grid_slack = sel.grid_slack;
-    out = keepLandmarks(trimmed, sel.selected, false);
+    out = keepLandmarks(trimmed, sel.selected, 0);
     last_selected = sel.selected;
     const double bytes = measure(out);
     last_bytes = bytes;
@@ -184,6 +186,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     if (bytes <= rep.budget_bytes) {
       have_fit = true;
       fit = std::move(out);
+      fit_selected = sel.selected;
       fit_report = rep;
       // Fits. If the byte model was pessimistic and K can grow, try a larger K.
       if (bytes >= params_.fill_accept * rep.budget_bytes || k >= params_.k_max) break;
@@ -211,6 +214,8 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     rep.rounds = rounds;
     rep.time_select_ms = t_sel;
     rep.time_encode_ms = t_enc;
+    if (rep.k >= params_.k_max && input.link_keeps_up)
+      addLoopKeypoints(trimmed, fit_selected, &fit, &rep);
     return finish(std::move(fit));
   }
   // Repair: the rounds missed (byte model off, or CBC cut short). Drop the least
@@ -237,7 +242,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     if (drop >= order.size()) break;
     last_selected.assign(order.begin() + static_cast<std::ptrdiff_t>(drop), order.end());
     std::sort(last_selected.begin(), last_selected.end());
-    out = keepLandmarks(trimmed, last_selected, false);
+    out = keepLandmarks(trimmed, last_selected, 0);
     last_bytes = measure(out);
     if (last_bytes <= rep.budget_bytes) {
       rep.selection_status += "+repaired";
@@ -256,6 +261,36 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   rep.observations = out.observationCount();
   rep.time_total_ms = msSince(t_start);
   return res;
+}
+
+void Distiller::addLoopKeypoints(const Submap& trimmed, const std::vector<int>& selected,
+                                 Submap* fit, DistillReport* rep) const {
+  // Wire bytes of one keypoint without a landmark: u, v, depth, octave, descriptor
+  // (zstd takes a little off; the encoded size below decides).
+  constexpr double kKeypointBytes = 4 + 4 + 4 + 1 + 32;
+  // At most half of S in all: the rest is slack for losses and resends.
+  constexpr double kMaxFill = 0.5;
+  const double fit_bytes = size_fn_ ? static_cast<double>(rep->bytes_actual) : rep->bytes_predicted;
+  const double limit = kMaxFill * rep->budget_bytes;
+  const double spare = limit - fit_bytes;
+  const double n_kf = static_cast<double>(std::max<std::size_t>(1, fit->keyframes.size()));
+  double n = std::min<double>(params_.loop_keypoints, std::floor(spare / (n_kf * kKeypointBytes)));
+  // Not through `measure`: the byte model describes landmarks and observations.
+  for (int attempt = 0; attempt < 2 && n >= 1; ++attempt, n = std::floor(n / 2)) {
+    Submap more = keepLandmarks(trimmed, selected, static_cast<std::size_t>(n));
+    const auto t0 = Clock::now();
+    std::size_t extra = 0;
+    for (std::size_t k = 0; k < more.keyframes.size(); ++k)
+      extra += more.keyframes[k].keypoints.size() - fit->keyframes[k].keypoints.size();
+    const double bytes = size_fn_ ? static_cast<double>(size_fn_(more))
+                                  : fit_bytes + kKeypointBytes * static_cast<double>(extra);
+    rep->time_encode_ms += msSince(t0);
+    if (bytes > limit) continue;
+    *fit = std::move(more);
+    rep->loop_keypoints = static_cast<int>(n);
+    if (size_fn_) rep->bytes_actual = static_cast<std::size_t>(bytes);
+    return;
+  }
 }
 
 }  // namespace distill

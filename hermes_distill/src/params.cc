@@ -42,6 +42,7 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("window_s", window_s)
   HERMES_READ("probe_gain", probe_gain)
   HERMES_READ("k_max", k_max)
+  HERMES_READ("loop_keypoints", loop_keypoints)
   HERMES_READ("k_min", k_min)
   HERMES_READ("k_pref", k_pref)
   HERMES_READ("min_keyframe_rate_hz", min_keyframe_rate_hz)
@@ -92,6 +93,7 @@ Status DistillParams::validate() const {
   if (!(window_s > 0)) return bad("window_s must be > 0");
   if (probe_gain < 0) return bad("probe_gain must be >= 0");
   if (k_min < 1 || k_max < k_min) return bad("k_min/k_max need 1 <= k_min <= k_max");
+  if (loop_keypoints < 0) return bad("loop_keypoints must be >= 0");
   if (min_keyframe_rate_hz < 0) return bad("min_keyframe_rate_hz must be >= 0");
   if (max_rounds < 1 || max_rounds > 3) return bad("max_rounds must be in [1, 3]");
   if (!(fill_accept > 0 && fill_accept <= plan_fill && plan_fill <= 1))
@@ -124,6 +126,7 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "window_s", window_s);
   out->set(p + "probe_gain", probe_gain);
   out->set(p + "k_max", k_max);
+  out->set(p + "loop_keypoints", loop_keypoints);
   out->set(p + "k_min", k_min);
   out->set(p + "k_pref", k_pref);
   out->set(p + "min_keyframe_rate_hz", min_keyframe_rate_hz);

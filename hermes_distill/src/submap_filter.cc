@@ -62,8 +62,32 @@ Submap applyKeyframeTrim(const Submap& w, const std::vector<int>& kept,
   return out;
 }
 
+namespace {
+
+/// Marks up to `n` of a keyframe's keypoints not linked to a kept landmark, spread
+/// evenly over their order (which follows the image grid), those with a measured
+/// depth first: loop closure uses both their bearing and their depth.
+std::vector<bool> extraKeypoints(const Keyframe& kf, const std::unordered_set<LandmarkId>& keep,
+                                 std::size_t n) {
+  std::vector<bool> take(kf.keypoints.size(), false);
+  std::vector<std::size_t> with_depth, without;
+  for (std::size_t p = 0; p < kf.keypoints.size(); ++p) {
+    const LandmarkId id = kf.keypoint_landmark[p];
+    if (id != kInvalidId && keep.count(id)) continue;
+    (kf.keypoints[p].depth > 0 ? with_depth : without).push_back(p);
+  }
+  for (const std::vector<std::size_t>* group : {&with_depth, &without}) {
+    const std::size_t m = std::min(n, group->size());
+    for (std::size_t j = 0; j < m; ++j) take[(*group)[j * group->size() / m]] = true;
+    n -= m;
+  }
+  return take;
+}
+
+}  // namespace
+
 Submap keepLandmarks(const Submap& s, const std::vector<int>& landmark_indices,
-                     bool keep_unlinked_keypoints) {
+                     std::size_t extra_keypoints) {
   Submap out;
   out.header = s.header;
   out.cameras = s.cameras;
@@ -79,10 +103,11 @@ Submap keepLandmarks(const Submap& s, const std::vector<int>& landmark_indices,
     k.keypoint_landmark.clear();
     std::vector<std::uint32_t>& map = remap[kf.id];
     map.assign(kf.keypoints.size(), ~std::uint32_t{0});
+    const std::vector<bool> extra = extraKeypoints(kf, keep, extra_keypoints);
     for (std::size_t p = 0; p < kf.keypoints.size(); ++p) {
       const LandmarkId id = kf.keypoint_landmark[p];
       const bool linked = id != kInvalidId && keep.count(id);
-      if (!linked && !keep_unlinked_keypoints) continue;
+      if (!linked && !extra[p]) continue;
       map[p] = static_cast<std::uint32_t>(k.keypoints.size());
       k.keypoints.push_back(kf.keypoints[p]);
       k.descriptors.push_back(kf.descriptors[p]);

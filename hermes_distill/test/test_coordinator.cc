@@ -223,6 +223,42 @@ TEST(Coordinator, ProbingSendsMore) {
   EXPECT_LE(static_cast<double>(probe.report.bytes_actual), probe.report.budget_bytes);
 }
 
+TEST(Coordinator, SpareBudgetCarriesLoopKeypointsOnlyOnALinkThatKeepsUp) {
+  const SyntheticWindow w = testing::window("V1_01_easy", 100.0);
+  DistillParams p;
+  p.loop_keypoints = 50;
+  CoordinatorInput in;
+  in.bandwidth_Bps = 20 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);  // ample
+  const DistillResult plain = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
+  in.link_keeps_up = true;
+  const DistillResult more = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
+  ASSERT_FALSE(plain.report.deferred);
+  ASSERT_FALSE(more.report.deferred);
+  EXPECT_EQ(plain.report.loop_keypoints, 0);
+  EXPECT_EQ(more.report.k, p.k_max);
+  EXPECT_EQ(more.report.loop_keypoints, 50);
+  EXPECT_EQ(more.submap.validate(), "");
+  // Same landmarks and observations; the extra keypoints carry no landmark.
+  EXPECT_EQ(more.submap.landmarks.size(), plain.submap.landmarks.size());
+  EXPECT_EQ(more.submap.observationCount(), plain.submap.observationCount());
+  std::size_t unlinked = 0, extra = 0;
+  for (std::size_t k = 0; k < more.submap.keyframes.size(); ++k) {
+    const Keyframe& kf = more.submap.keyframes[k];
+    extra += kf.keypoints.size() - plain.submap.keyframes[k].keypoints.size();
+    for (LandmarkId id : kf.keypoint_landmark) unlinked += id == kInvalidId ? 1 : 0;
+  }
+  EXPECT_GT(extra, 0u);
+  EXPECT_LE(extra, 50 * more.submap.keyframes.size());
+  EXPECT_EQ(unlinked, extra);
+  EXPECT_EQ(more.report.bytes_actual, referenceEncodedSize(more.submap));
+  EXPECT_LE(static_cast<double>(more.report.bytes_actual), 0.5 * more.report.budget_bytes);
+  // A budget the landmarks already fill more than half of leaves none for them.
+  in.bandwidth_Bps = 1.2 * static_cast<double>(plain.report.bytes_actual) / (p.eta * p.window_s);
+  const DistillResult tight = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
+  ASSERT_FALSE(tight.report.deferred);
+  EXPECT_EQ(tight.report.loop_keypoints, 0);
+}
+
 TEST(Coordinator, OffUsesFixedKAndNoneStreamsEverything) {
   const SyntheticWindow w = testing::window("MH_01_easy", 130.0);
   DistillParams p;

@@ -149,7 +149,7 @@ TEST(Trimming, KeepLandmarksReindexesKeypoints) {
   const Submap w = testing::window("V1_01_easy", 60.0).submap;
   std::vector<int> keep;
   for (int i = 0; i < static_cast<int>(w.landmarks.size()); i += 3) keep.push_back(i);
-  const Submap s = keepLandmarks(w, keep, false);
+  const Submap s = keepLandmarks(w, keep, 0);
   EXPECT_EQ(s.validate(), "");
   EXPECT_EQ(s.landmarks.size(), keep.size());
   std::size_t keypoints = 0;
@@ -162,9 +162,48 @@ TEST(Trimming, KeepLandmarksReindexesKeypoints) {
       ASSERT_NE(kf, nullptr);
       EXPECT_EQ(kf->keypoint_landmark[ob.keypoint], lm.id);
     }
-  const Submap raw = keepLandmarks(w, keep, true);
+  const Submap raw = keepLandmarks(w, keep, kAllKeypoints);
   EXPECT_EQ(raw.validate(), "");
   EXPECT_EQ(raw.keyframes[0].keypoints.size(), w.keyframes[0].keypoints.size());
+
+  // Loop keypoints: up to 20 more per keyframe, unlinked, measured depths first.
+  const Submap extra = keepLandmarks(w, keep, 20);
+  EXPECT_EQ(extra.validate(), "");
+  EXPECT_EQ(extra.observationCount(), s.observationCount());
+  for (std::size_t k = 0; k < extra.keyframes.size(); ++k) {
+    const Keyframe& in = w.keyframes[k];
+    std::size_t free_with_depth = 0;
+    for (std::size_t p = 0; p < in.keypoints.size(); ++p)
+      free_with_depth += in.keypoints[p].depth > 0 ? 1 : 0;
+    free_with_depth -= std::min(free_with_depth, s.keyframes[k].keypoints.size());
+    const Keyframe& out = extra.keyframes[k];
+    const std::size_t added = out.keypoints.size() - s.keyframes[k].keypoints.size();
+    EXPECT_EQ(added, std::min<std::size_t>(20, in.keypoints.size() - s.keyframes[k].keypoints.size()));
+    std::size_t unlinked = 0, unlinked_with_depth = 0;
+    for (std::size_t p = 0; p < out.keypoints.size(); ++p) {
+      if (out.keypoint_landmark[p] != kInvalidId) continue;
+      ++unlinked;
+      unlinked_with_depth += out.keypoints[p].depth > 0 ? 1 : 0;
+    }
+    EXPECT_EQ(unlinked, added);
+    if (free_with_depth >= 40) {
+      EXPECT_EQ(unlinked_with_depth, added) << "keyframe " << k;
+    }
+  }
+  // Half the depths unknown: the extra keypoints are still those with depths.
+  Submap half = w;
+  for (Keyframe& kf : half.keyframes)
+    for (std::size_t p = 0; p < kf.keypoints.size(); p += 2) kf.keypoints[p].depth = 0;
+  const Submap picked = keepLandmarks(half, keep, 20);
+  std::size_t extra_total = 0, extra_with_depth = 0;
+  for (const Keyframe& kf : picked.keyframes)
+    for (std::size_t p = 0; p < kf.keypoints.size(); ++p)
+      if (kf.keypoint_landmark[p] == kInvalidId) {
+        ++extra_total;
+        extra_with_depth += kf.keypoints[p].depth > 0 ? 1 : 0;
+      }
+  EXPECT_GT(extra_total, 0u);
+  EXPECT_EQ(extra_with_depth, extra_total);
 }
 
 }  // namespace

@@ -48,6 +48,7 @@ struct DistillReport {
   int n_lm_in = 0, n_lm = 0;
   std::size_t observations = 0;
   int k = 0;                   ///< landmarks per keyframe targeted
+  int loop_keypoints = 0;      ///< keypoints per keyframe sent without a landmark (spare budget)
   double budget_bytes = 0;     ///< S (infinite with the coordinator off)
   double bytes_planned = 0;    ///< coordinator's prediction for its (N_KF, K) plan
   double bytes_predicted = 0;  ///< byte model of the sent submap
@@ -83,6 +84,13 @@ class Distiller {
   const DistillParams& params() const { return params_; }
 
  private:
+  /// Once K reached k_max on a link that keeps up (CoordinatorInput::link_keeps_up):
+  /// up to distill.loop_keypoints keypoints per keyframe without a landmark (what
+  /// the server's loop closure matches), as many as fit in half the budget;
+  /// `fit` is unchanged otherwise.
+  void addLoopKeypoints(const Submap& trimmed, const std::vector<int>& selected, Submap* fit,
+                        DistillReport* rep) const;
+
   DistillParams params_;
   EncodedSizeFn size_fn_;
   std::unique_ptr<LandmarkSelector> selector_;

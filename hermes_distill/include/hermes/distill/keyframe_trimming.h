@@ -59,11 +59,13 @@ double trimObjective(const Submap& window, const std::vector<int>& kept,
 Submap applyKeyframeTrim(const Submap& window, const std::vector<int>& kept,
                          const DistillParams& params);
 
-/// Keeps the landmarks with the given indices. Keyframes keep only keypoints
-/// linked to kept landmarks unless keep_unlinked_keypoints (raw streaming);
-/// observations are re-indexed.
+/// Keeps the landmarks with the given indices. Keyframes keep the keypoints
+/// linked to kept landmarks and, each, up to `extra_keypoints` others (with a
+/// measured depth first, spread over the keyframe; kAllKeypoints keeps every
+/// one); observations are re-indexed.
+inline constexpr std::size_t kAllKeypoints = static_cast<std::size_t>(-1);
 Submap keepLandmarks(const Submap& submap, const std::vector<int>& landmark_indices,
-                     bool keep_unlinked_keypoints);
+                     std::size_t extra_keypoints);
 
 }  // namespace distill
 }  // namespace hermes

@@ -32,6 +32,10 @@
 //   distill.max_keyframes     N_KF when the coordinator is off
 //   distill.k_max, distill.k_min   range of K the coordinator may choose
 //   distill.k_pref            K the coordinator keeps before it drops keyframes
+//   distill.loop_keypoints    most keypoints per kept keyframe sent without a
+//                             landmark (descriptor + depth, for the server's loop
+//                             closure) once K = k_max leaves budget over on a link
+//                             that keeps up (at most half the budget); 0 = none
 //   distill.min_keyframe_rate_hz   floor: fewer kept keyframes per second -> defer
 //   distill.max_rounds        encode/shrink rounds (<= 3)
 //   distill.plan_fill         fraction of the budget S the planned (N_KF, K) is
@@ -62,6 +66,7 @@ struct DistillParams {
   double window_s = 5.0;
   double probe_gain = 0.25;
   int k_max = 150;
+  int loop_keypoints = 300;  // spare budget -> bearings for loop closure (2.5 -> 2.0 mm loops)
   int k_min = 15;
   int k_pref = 60;
   double min_keyframe_rate_hz = 0.4;
