@@ -31,7 +31,7 @@ struct MapManagerParams {
   PoseGraphParams pose_graph;                ///< server.pose_graph.*
   // server.map.*
   int rig_neighbours = 2;              ///< m neighbours per rig side
-  int max_candidates_per_keyframe = 1; ///< place candidates verified per keyframe
+  int max_candidates_per_keyframe = 2; ///< place candidates verified per keyframe
   int optimize_every_submaps = 10;     ///< also optimise after this many merges (0 = only on new loops)
   double odometry_sigma_m = 0.01;      ///< odometry between submaps (no edge sent) [m]
   double odometry_sigma_rad = 0.005;   ///< same, rotation [rad]
