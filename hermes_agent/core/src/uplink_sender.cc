@@ -57,7 +57,7 @@ void UplinkSender::poll(double now) {
     // flight up to and including it needs in_flight / rate seconds, and resending
     // into a slow link only adds to the congestion.
     if (auto it = in_flight_.find(key); it != in_flight_.end()) {
-      const double rate = monitor_.sampledRate(now);
+      const double rate = monitor_.estimate(now);
       const double busy_s = rate > 0 ? static_cast<double>(in_flight) / rate : 0.0;
       if (!monitor_.outage(now) && now - next->last_sent < p_.buffer.resend_timeout_s + busy_s)
         return;

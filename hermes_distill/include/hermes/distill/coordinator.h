@@ -28,8 +28,9 @@ struct CoordinatorInput {
   double backlog_bytes = 0;   ///< bytes still unacknowledged in the buffer
   int loop_closures = 0;      ///< loops found so far (α rule)
   bool probe = false;         ///< last window's budget was fully delivered: probe higher
-  /// B̂ comes from acknowledged data (not the start guess) and nothing sent is
-  /// still unacknowledged: only then may spare budget carry loop keypoints.
+  /// B̂ comes from acknowledged data (not the start guess), nothing sent is still
+  /// unacknowledged and the window carries no deferred one (a deferral means the
+  /// link is tight): only then may spare budget carry loop keypoints.
   bool link_keeps_up = false;
   /// Time the window stands for [s]; 0 = one window period (distill.window_s). A
   /// window carrying deferred ones stands for all their periods: the link had

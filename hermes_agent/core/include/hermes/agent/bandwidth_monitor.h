@@ -56,11 +56,6 @@ class BandwidthMonitor {
   /// Rate to plan the next window with: estimate × probe factor when probing.
   double planningRate(double t) const;
   bool outage(double t) const;
-  /// Max-filtered / decayed rate from the acknowledgements alone (the start guess
-  /// before any): no outage, no overdue cap. What a resend timer may wait on: the
-  /// cap is derived from the overdue message itself, so a wait computed with it
-  /// grows as fast as the time waited and never ends.
-  double sampledRate(double t) const;
   std::size_t outstandingBytes() const;
   int samples() const { return static_cast<int>(sample_count_); }
 
@@ -78,6 +73,8 @@ class BandwidthMonitor {
   };
   const Outstanding* oldestOutstanding() const;
   bool outage(double t, const Outstanding* oldest) const;
+  /// Max-filtered / decayed rate from the samples alone (no outage, no bound).
+  double sampledRate(double t) const;
   BandwidthMonitorParams p_;
   std::map<std::uint64_t, Outstanding> outstanding_;
   std::deque<Sample> samples_;

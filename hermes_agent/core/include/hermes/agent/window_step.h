@@ -87,7 +87,7 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
   in.bandwidth_Bps = monitor.planningRate(sink ? sink->link_now : stamp);
   in.backlog_bytes = sink ? sink->backlog_bytes : 0;
   in.loop_closures = sink ? sink->loop_closures : 0;
-  in.link_keeps_up = sink && monitor.samples() > 0 && sink->backlog_bytes <= 0;
+  in.link_keeps_up = sink && monitor.samples() > 0 && sink->backlog_bytes <= 0 && periods == 1;
   in.period_s = periods * distiller.params().window_s;
   const auto t0 = std::chrono::steady_clock::now();
   distill::DistillResult r = distiller.distill(window, motion, in);
