@@ -50,10 +50,11 @@ struct LoopClosureParams {
   /// 3-robot merged ATE 15 s 0.32 -> 0.30 cm, 30 s 0.77 -> 0.67 cm.
   double covariance_inflation = 16.0;
   /// Reject loops whose translation is this poorly constrained [m] (sigma after
-  /// the inflation). 3 cm at inflation 4: on the rendered runs good loops had a
-  /// median sigma of 0.7 cm; the loose ones were the inaccurate ones (wide
-  /// baselines, repeated textures). 6 cm at 16 keeps the same loops.
-  double max_translation_sigma_m = 0.06;
+  /// the inflation). 3 cm: on the rendered runs good loops had a median sigma of
+  /// 0.7 cm at inflation 4; the loose ones were the inaccurate ones (wide
+  /// baselines, repeated textures). Kept at 3 cm with inflation 16: 6 cm let loops
+  /// 10-12 cm off through PCM (15-s bench: 1-2 per run, none at 3 cm).
+  double max_translation_sigma_m = 0.03;
   /// Focal length x stereo baseline [px m]: the refinement adds each keypoint's
   /// measured depth (stereo / RGB-D) as a residual fb * (1/z_pred - 1/z_obs) in
   /// disparity pixels, which fixes the metric translation a short rig baseline leaves
