@@ -103,11 +103,13 @@ Submap keepLandmarks(const Submap& s, const std::vector<int>& landmark_indices,
     k.keypoint_landmark.clear();
     std::vector<std::uint32_t>& map = remap[kf.id];
     map.assign(kf.keypoints.size(), ~std::uint32_t{0});
-    const std::vector<bool> extra = extraKeypoints(kf, keep, extra_keypoints);
+    // Every selection round comes here without extras: no per-keyframe mask then.
+    const std::vector<bool> extra =
+        extra_keypoints > 0 ? extraKeypoints(kf, keep, extra_keypoints) : std::vector<bool>();
     for (std::size_t p = 0; p < kf.keypoints.size(); ++p) {
       const LandmarkId id = kf.keypoint_landmark[p];
       const bool linked = id != kInvalidId && keep.count(id);
-      if (!linked && !extra[p]) continue;
+      if (!linked && (extra.empty() || !extra[p])) continue;
       map[p] = static_cast<std::uint32_t>(k.keypoints.size());
       k.keypoints.push_back(kf.keypoints[p]);
       k.descriptors.push_back(kf.descriptors[p]);
