@@ -6,6 +6,7 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <unordered_set>
 
 #include "hermes/distill/keyframe_trimming.h"
 #include "hermes/distill/selectors.h"
@@ -216,6 +217,8 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     rep.time_encode_ms = t_enc;
     if (rep.k >= params_.k_max && input.link_keeps_up)
       addLoopKeypoints(trimmed, fit_selected, &fit, &rep);
+    else if (rep.k >= params_.k_max && input.link_unmeasured && params_.loop_keypoints > 0)
+      res.held_back = heldBackKeypoints(trimmed, fit_selected);
     return finish(std::move(fit));
   }
   // Repair: the rounds missed (byte model off, or CBC cut short). Drop the least
@@ -263,34 +266,80 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   return res;
 }
 
-void Distiller::addLoopKeypoints(const Submap& trimmed, const std::vector<int>& selected,
-                                 Submap* fit, DistillReport* rep) const {
-  // Wire bytes of one keypoint without a landmark: u, v, depth, octave, descriptor
-  // (zstd takes a little off; the encoded size below decides).
-  constexpr double kKeypointBytes = 4 + 4 + 4 + 1 + 32;
-  // At most half of S in all: the rest is slack for losses and resends.
-  constexpr double kMaxFill = 0.5;
+namespace {
+// Wire bytes of one keypoint without a landmark: u, v, depth, octave, descriptor
+// (zstd takes a little off; the encoded size decides where there is one).
+constexpr double kKeypointBytes = 4 + 4 + 4 + 1 + 32;
+// Keypoints without a landmark use at most half of S with the rest of the
+// window: the other half is slack for losses and resends.
+constexpr double kMaxFill = 0.5;
+
+std::size_t keypointCount(const Submap& s) {
+  std::size_t n = 0;
+  for (const Keyframe& kf : s.keyframes) n += kf.keypoints.size();
+  return n;
+}
+}  // namespace
+
+int Distiller::spendSpareOnKeypoints(std::size_t n_kf,
+                                     const std::function<Submap(std::size_t)>& build, Submap* fit,
+                                     DistillReport* rep) const {
   const double fit_bytes = size_fn_ ? static_cast<double>(rep->bytes_actual) : rep->bytes_predicted;
   const double limit = kMaxFill * rep->budget_bytes;
   const double spare = limit - fit_bytes;
-  const double n_kf = static_cast<double>(std::max<std::size_t>(1, fit->keyframes.size()));
-  double n = std::min<double>(params_.loop_keypoints, std::floor(spare / (n_kf * kKeypointBytes)));
+  const double kfs = static_cast<double>(std::max<std::size_t>(1, n_kf));
+  double n = std::min<double>(params_.loop_keypoints, std::floor(spare / (kfs * kKeypointBytes)));
+  const std::size_t base = keypointCount(*fit);
   // Not through `measure`: the byte model describes landmarks and observations.
   for (int attempt = 0; attempt < 2 && n >= 1; ++attempt, n = std::floor(n / 2)) {
-    Submap more = keepLandmarks(trimmed, selected, static_cast<std::size_t>(n));
+    Submap more = build(static_cast<std::size_t>(n));
     const auto t0 = Clock::now();
-    std::size_t extra = 0;
-    for (std::size_t k = 0; k < more.keyframes.size(); ++k)
-      extra += more.keyframes[k].keypoints.size() - fit->keyframes[k].keypoints.size();
+    const double extra = static_cast<double>(keypointCount(more) - base);
     const double bytes = size_fn_ ? static_cast<double>(size_fn_(more))
-                                  : fit_bytes + kKeypointBytes * static_cast<double>(extra);
+                                  : fit_bytes + kKeypointBytes * extra;
     rep->time_encode_ms += msSince(t0);
     if (bytes > limit) continue;
     *fit = std::move(more);
-    rep->loop_keypoints = static_cast<int>(n);
     if (size_fn_) rep->bytes_actual = static_cast<std::size_t>(bytes);
-    return;
+    else rep->bytes_predicted = bytes;
+    return static_cast<int>(n);
   }
+  return 0;
+}
+
+void Distiller::addLoopKeypoints(const Submap& trimmed, const std::vector<int>& selected,
+                                 Submap* fit, DistillReport* rep) const {
+  rep->loop_keypoints = spendSpareOnKeypoints(
+      fit->keyframes.size(),
+      [&](std::size_t n) { return keepLandmarks(trimmed, selected, n); }, fit, rep);
+}
+
+void Distiller::extendWithHeldBack(const Submap& held, DistillResult* r) const {
+  DistillReport& rep = r->report;
+  if (!rep.ok || rep.deferred || params_.loop_keypoints <= 0 || held.keyframes.empty() ||
+      r->submap.keyframes.empty())
+    return;
+  const double window_start = r->submap.header.t_start;
+  std::unordered_set<KeyframeId> in_window;
+  for (const Keyframe& kf : r->submap.keyframes) in_window.insert(kf.id);
+  std::vector<const Keyframe*> earlier;  // only keyframes before this window can extend
+  for (const Keyframe& kf : held.keyframes)
+    if (kf.stamp < window_start && !in_window.count(kf.id)) earlier.push_back(&kf);
+  if (earlier.empty()) return;
+  Submap source;
+  for (const Keyframe* kf : earlier) source.keyframes.push_back(*kf);
+  const std::size_t before = r->submap.keyframes.size();
+  rep.extension_keypoints = spendSpareOnKeypoints(
+      source.keyframes.size(),
+      [&](std::size_t n) {
+        Submap more = r->submap;  // unchanged until a candidate is taken
+        std::vector<Keyframe> ext = keyframeExtensions(source, n);
+        more.keyframes.insert(more.keyframes.begin(), ext.begin(), ext.end());
+        return more;
+      },
+      &r->submap, &rep);
+  if (rep.extension_keypoints > 0)
+    rep.extension_keyframes = static_cast<int>(r->submap.keyframes.size() - before);
 }
 
 }  // namespace distill

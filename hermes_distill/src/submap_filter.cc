@@ -135,5 +135,49 @@ Submap keepLandmarks(const Submap& s, const std::vector<int>& landmark_indices,
   return out;
 }
 
+namespace {
+
+/// The keyframe with only the keypoints `take` marks, none linked to a landmark.
+Keyframe unlinkedSubset(const Keyframe& kf, const std::vector<bool>& take) {
+  Keyframe k = kf;
+  k.keypoints.clear();
+  k.descriptors.clear();
+  k.keypoint_landmark.clear();
+  for (std::size_t p = 0; p < kf.keypoints.size(); ++p) {
+    if (!take[p]) continue;
+    k.keypoints.push_back(kf.keypoints[p]);
+    k.descriptors.push_back(kf.descriptors[p]);
+    k.keypoint_landmark.push_back(kInvalidId);
+  }
+  return k;
+}
+
+}  // namespace
+
+Submap heldBackKeypoints(const Submap& s, const std::vector<int>& landmark_indices) {
+  Submap out;
+  out.header = s.header;
+  out.cameras = s.cameras;
+  std::unordered_set<LandmarkId> keep;
+  for (int i : landmark_indices) keep.insert(s.landmarks[static_cast<std::size_t>(i)].id);
+  for (const Keyframe& kf : s.keyframes) {
+    std::vector<bool> take(kf.keypoints.size());
+    for (std::size_t p = 0; p < kf.keypoints.size(); ++p)
+      take[p] = kf.keypoint_landmark[p] == kInvalidId || !keep.count(kf.keypoint_landmark[p]);
+    out.keyframes.push_back(unlinkedSubset(kf, take));
+  }
+  return out;
+}
+
+std::vector<Keyframe> keyframeExtensions(const Submap& held, std::size_t n) {
+  std::vector<Keyframe> out;
+  const std::unordered_set<LandmarkId> none;
+  for (const Keyframe& kf : held.keyframes) {
+    Keyframe k = unlinkedSubset(kf, extraKeypoints(kf, none, n));
+    if (!k.keypoints.empty()) out.push_back(std::move(k));
+  }
+  return out;
+}
+
 }  // namespace distill
 }  // namespace hermes

@@ -259,6 +259,72 @@ TEST(Coordinator, SpareBudgetCarriesLoopKeypointsOnlyOnALinkThatKeepsUp) {
   EXPECT_EQ(tight.report.loop_keypoints, 0);
 }
 
+/// `s` with every keyframe id shifted by `offset` (synthetic windows reuse ids).
+Submap shiftKeyframeIds(Submap s, KeyframeId offset) {
+  for (Keyframe& kf : s.keyframes) kf.id += offset;
+  for (Landmark& lm : s.landmarks)
+    for (Observation& ob : lm.observations) ob.keyframe += offset;
+  for (OdometryEdge& e : s.odometry) e.from += offset, e.to += offset;
+  return s;
+}
+
+TEST(Coordinator, AWindowPlannedOnAnUnmeasuredLinkHoldsItsLoopKeypointsForExtensions) {
+  const SyntheticWindow first = testing::window("V1_01_easy", 100.0);
+  SyntheticWindow second = testing::window("V1_01_easy", 106.0);
+  second.submap = shiftKeyframeIds(std::move(second.submap), 100000);
+  DistillParams p;
+  p.loop_keypoints = 50;
+  Distiller d(p, referenceEncodedSize);
+  CoordinatorInput in;
+  in.bandwidth_Bps = 20 * referenceEncodedSize(first.submap) / (p.eta * p.window_s);  // ample
+  in.link_unmeasured = true;  // planned on the start guess
+  const DistillResult a = d.distill(first.submap, first.hint, in);
+  ASSERT_FALSE(a.report.deferred);
+  EXPECT_EQ(a.report.loop_keypoints, 0);
+  ASSERT_TRUE(a.held_back.has_value());
+  ASSERT_EQ(a.held_back->keyframes.size(), a.submap.keyframes.size());
+  for (std::size_t k = 0; k < a.submap.keyframes.size(); ++k) {
+    const Keyframe& sent = a.submap.keyframes[k];
+    const Keyframe& held = a.held_back->keyframes[k];
+    EXPECT_EQ(held.id, sent.id);
+    EXPECT_GT(held.keypoints.size(), 0u);
+    for (LandmarkId id : held.keypoint_landmark) EXPECT_EQ(id, kInvalidId);
+    for (const Keypoint& h : held.keypoints)  // nothing sent is held back
+      for (const Keypoint& s : sent.keypoints)
+        ASSERT_FALSE(h.u == s.u && h.v == s.v && h.octave == s.octave);
+  }
+  // The next window, on a link that keeps up, carries them as extensions.
+  in.link_unmeasured = false;
+  in.link_keeps_up = true;
+  DistillResult b = d.distill(second.submap, second.hint, in);
+  ASSERT_FALSE(b.report.deferred);
+  EXPECT_FALSE(b.held_back.has_value());
+  const std::size_t window_kfs = b.submap.keyframes.size();
+  d.extendWithHeldBack(*a.held_back, &b);
+  EXPECT_EQ(b.report.extension_keypoints, 50);
+  EXPECT_EQ(b.report.extension_keyframes, static_cast<int>(a.submap.keyframes.size()));
+  ASSERT_EQ(b.submap.keyframes.size(), window_kfs + a.submap.keyframes.size());
+  EXPECT_EQ(b.submap.validate(), "");
+  EXPECT_EQ(b.submap.windowKeyframeCount(), window_kfs);
+  for (int k = 0; k < b.report.extension_keyframes; ++k) {
+    const Keyframe& ext = b.submap.keyframes[static_cast<std::size_t>(k)];
+    EXPECT_TRUE(b.submap.isExtension(ext));
+    EXPECT_EQ(ext.id, a.submap.keyframes[static_cast<std::size_t>(k)].id);
+    EXPECT_LE(ext.keypoints.size(), 50u);
+  }
+  EXPECT_EQ(b.report.bytes_actual, referenceEncodedSize(b.submap));
+  EXPECT_LE(static_cast<double>(b.report.bytes_actual), 0.5 * b.report.budget_bytes);
+  // A window whose own keypoints fill half its budget has no room left for them.
+  in.bandwidth_Bps = 1.2 * static_cast<double>(b.report.bytes_actual) / (p.eta * p.window_s);
+  in.link_keeps_up = false;
+  DistillResult tight = Distiller(p, referenceEncodedSize).distill(second.submap, second.hint, in);
+  ASSERT_FALSE(tight.report.deferred);
+  const std::size_t tight_kfs = tight.submap.keyframes.size();
+  d.extendWithHeldBack(*a.held_back, &tight);
+  EXPECT_EQ(tight.report.extension_keyframes, 0);
+  EXPECT_EQ(tight.submap.keyframes.size(), tight_kfs);
+}
+
 TEST(Coordinator, OffUsesFixedKAndNoneStreamsEverything) {
   const SyntheticWindow w = testing::window("MH_01_easy", 130.0);
   DistillParams p;

@@ -68,6 +68,12 @@ std::size_t Submap::observationCount() const {
   return n;
 }
 
+std::size_t Submap::windowKeyframeCount() const {
+  std::size_t n = 0;
+  for (const Keyframe& kf : keyframes) n += isExtension(kf) ? 0 : 1;
+  return n;
+}
+
 std::string Submap::validate() const {
   std::ostringstream err;
   std::unordered_map<KeyframeId, const Keyframe*> kfs;
@@ -93,6 +99,15 @@ std::string Submap::validate() const {
           << " landmark links";
       return err.str();
     }
+    if (isExtension(kf)) {
+      for (LandmarkId id : kf.keypoint_landmark) {
+        if (id != kInvalidId) {
+          err << "keyframe extension " << kf.id << " (stamp before the window start) links landmark "
+              << id << "; extensions carry keypoints only";
+          return err.str();
+        }
+      }
+    }
   }
   std::unordered_set<LandmarkId> lms;
   for (const auto& lm : landmarks) {
@@ -110,6 +125,10 @@ std::string Submap::validate() const {
         err << "landmark " << lm.id << " is observed by unknown keyframe " << ob.keyframe;
         return err.str();
       }
+      if (isExtension(*it->second)) {
+        err << "landmark " << lm.id << " is observed by keyframe extension " << ob.keyframe;
+        return err.str();
+      }
       if (ob.keypoint >= it->second->keypoints.size()) {
         err << "landmark " << lm.id << " points at keypoint " << ob.keypoint << " of keyframe "
             << ob.keyframe << " which has " << it->second->keypoints.size();
@@ -120,6 +139,10 @@ std::string Submap::validate() const {
   for (const auto& e : odometry) {
     if (!kfs.count(e.from) || !kfs.count(e.to)) {
       err << "odometry edge " << e.from << "->" << e.to << " names a keyframe not in the submap";
+      return err.str();
+    }
+    if (isExtension(*kfs.at(e.from)) || isExtension(*kfs.at(e.to))) {
+      err << "odometry edge " << e.from << "->" << e.to << " names a keyframe extension";
       return err.str();
     }
   }

@@ -42,6 +42,33 @@ TEST(MapTypes, ValidationNamesTheProblem) {
   EXPECT_NE(s.validate().find("camera 3"), std::string::npos);
 }
 
+TEST(MapTypes, KeyframeExtensionsCarryKeypointsOnly) {
+  Submap s = tinySubmap();
+  s.header.t_start = 1.0;
+  for (Keyframe& kf : s.keyframes) kf.stamp = 1.5;
+  Keyframe ext;  // extends keyframe 4 of an earlier submap
+  ext.id = 4;
+  ext.stamp = 0.5;
+  ext.keypoints.resize(3);
+  ext.descriptors.resize(3);
+  ext.keypoint_landmark.assign(3, kInvalidId);
+  s.keyframes.insert(s.keyframes.begin(), ext);
+  EXPECT_EQ(s.validate(), "");
+  EXPECT_TRUE(s.isExtension(s.keyframes[0]));
+  EXPECT_FALSE(s.isExtension(s.keyframes[1]));
+  EXPECT_EQ(s.windowKeyframeCount(), 2u);
+
+  Submap bad = s;
+  bad.keyframes[0].keypoint_landmark[1] = 7;
+  EXPECT_NE(bad.validate().find("keyframe extension 4"), std::string::npos) << bad.validate();
+  bad = s;
+  bad.landmarks[0].observations.push_back({4, 2});
+  EXPECT_NE(bad.validate().find("observed by keyframe extension 4"), std::string::npos);
+  bad = s;
+  bad.odometry.push_back(OdometryEdge{4, 10, SE3(), Mat6::Identity()});
+  EXPECT_NE(bad.validate().find("names a keyframe extension"), std::string::npos);
+}
+
 TEST(MapTypes, UuidRoundTripAndHamming) {
   const Uuid a = uuidFromSeed(42);
   Uuid b{};

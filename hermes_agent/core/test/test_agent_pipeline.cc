@@ -3,6 +3,7 @@
 // tracking never lost, trajectory expressed in the body frame, ATE bounded.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 
@@ -305,4 +306,65 @@ TEST(WindowStep, CarriedWindowIsRetriedWithoutANewWindow) {
   ASSERT_EQ(accepted.size(), 1u);
   EXPECT_EQ(counters.sent, 1);
   EXPECT_EQ(counters.windows, 1);
+}
+
+// The first window is planned before any acknowledgement: it holds back the
+// loop keypoints a link that keeps up would carry; the next window sends them
+// as keyframe extensions once acknowledgements show the link keeps up, and
+// drops them when they show it does not.
+TEST(WindowStep, HeldBackKeypointsFollowAsExtensionsOnlyOnALinkThatKeepsUp) {
+  auto scene = v101Scene();
+  ASSERT_TRUE(scene.ok()) << scene.error();
+  auto distiller = greedyDistiller();
+  ASSERT_TRUE(distiller.ok()) << distiller.error();
+  for (bool keeps_up : {true, false}) {
+    SCOPED_TRACE(keeps_up ? "link keeps up" : "link does not keep up");
+    agent::BandwidthMonitorParams mp;
+    mp.initial_bps = 5e6;  // an optimistic start guess
+    agent::BandwidthMonitor monitor(mp);
+    SyntheticWindowSource source(&*scene);
+    agent::WindowCounters counters;
+    TimingStats timings;
+    std::vector<Submap> accepted;
+    agent::WindowSink sink;
+    sink.submit = [&](const Submap& s, std::vector<std::uint8_t>&&) -> Status {
+      accepted.push_back(s);
+      return Status::Ok();
+    };
+    for (int i = 0; i <= 20; ++i)  // the first window, at 5 s
+      agent::runWindowStep(source, **distiller, monitor, 5.0 + 0.05 * i, &counters, &timings, &sink);
+    ASSERT_EQ(accepted.size(), 1u);
+    ASSERT_TRUE(counters.held.has_value());
+    for (const Keyframe& kf : accepted[0].keyframes) EXPECT_FALSE(accepted[0].isExtension(kf));
+    // Its acknowledgement measures 5 MB/s; something sent is still unacknowledged
+    // when the link does not keep up.
+    monitor.onSend(0, 200000, 6.0);
+    monitor.onAck(0, 6.04);
+    sink.link_now = 10.0;
+    sink.backlog_bytes = keeps_up ? 0 : 1000;
+    for (int i = 21; i <= 100; ++i)  // the second window, at 10 s
+      agent::runWindowStep(source, **distiller, monitor, 5.0 + 0.05 * i, &counters, &timings, &sink);
+    ASSERT_EQ(accepted.size(), 2u);
+    EXPECT_FALSE(counters.held.has_value());
+    const Submap& second = accepted[1];
+    EXPECT_EQ(second.validate(), "");
+    std::size_t extensions = 0;
+    for (const Keyframe& kf : second.keyframes) {
+      if (!second.isExtension(kf)) continue;
+      ++extensions;
+      EXPECT_NE(std::find_if(accepted[0].keyframes.begin(), accepted[0].keyframes.end(),
+                             [&](const Keyframe& f) { return f.id == kf.id; }),
+                accepted[0].keyframes.end());
+    }
+    EXPECT_EQ(static_cast<std::int64_t>(extensions), counters.extended_keyframes);
+    if (keeps_up) {  // every first-window keyframe before the second window
+      std::size_t earlier = 0;
+      for (const Keyframe& kf : accepted[0].keyframes)
+        earlier += kf.stamp < second.header.t_start ? 1 : 0;
+      EXPECT_GT(extensions, 0u);
+      EXPECT_EQ(extensions, earlier);
+    } else {
+      EXPECT_EQ(extensions, 0u);
+    }
+  }
 }

@@ -39,7 +39,7 @@ SubmapArrival SubmapArrival::of(const Submap& submap, std::size_t bytes) {
   SubmapArrival a;
   a.header = submap.header;
   a.bytes = bytes;
-  a.keyframes = submap.keyframes.size();
+  a.keyframes = submap.windowKeyframeCount();  // extensions add no keyframe
   a.landmarks = submap.landmarks.size();
   a.observations = submap.observationCount();
   return a;

@@ -80,7 +80,8 @@ Mat6 MapManager::defaultOdometryInformation() const {
 }
 
 void MapManager::storeSubmap(RobotId robot, const Submap& submap,
-                             std::vector<KeyframeKey>* added) {
+                             std::vector<KeyframeKey>* added, std::vector<KeyframeKey>* extended,
+                             MergeStats* stats) {
   const std::uint32_t session = submap.header.session;
   TrajectoryMap& t = map_.trajectories[{robot, session}];
   t.agent = robot;
@@ -88,8 +89,23 @@ void MapManager::storeSubmap(RobotId robot, const Submap& submap,
   t.uuid = submap.header.agent;
   for (const OdometryEdge& e : submap.odometry) t.odometry[{e.from, e.to}] = e;
   std::vector<const Keyframe*> order;
-  for (const Keyframe& kf : submap.keyframes)
+  for (const Keyframe& kf : submap.keyframes) {
+    if (submap.isExtension(kf)) {
+      auto it = t.keyframes.find(kf.id);
+      if (it == t.keyframes.end()) {
+        ++stats->extensions_unknown;  // its window never arrived (or another session's)
+        continue;
+      }
+      Keyframe& stored = it->second.keyframe;
+      stored.keypoints.insert(stored.keypoints.end(), kf.keypoints.begin(), kf.keypoints.end());
+      stored.descriptors.insert(stored.descriptors.end(), kf.descriptors.begin(), kf.descriptors.end());
+      stored.keypoint_landmark.resize(stored.keypoints.size(), kInvalidId);
+      extended->push_back(keyOf(t, kf.id));
+      ++stats->keyframes_extended;
+      continue;
+    }
     if (!t.keyframes.count(kf.id)) order.push_back(&kf);
+  }
   std::sort(order.begin(), order.end(),
             [](const Keyframe* a, const Keyframe* b) { return a->id < b->id; });
   for (const Keyframe* kf : order) {
@@ -156,6 +172,30 @@ std::vector<const Keyframe*> MapManager::neighbours(const KeyframeKey& key,
   return out;
 }
 
+std::optional<LoopEdge> MapManager::closeLoop(const KeyframeKey& query,
+                                              const KeyframeKey& candidate) {
+  const StoredKeyframe* q = map_.keyframe(query);
+  const StoredKeyframe* c = map_.keyframe(candidate);
+  if (!q || !c || query == candidate) return std::nullopt;
+  std::vector<PinholeIntrinsics> qcams, ccams;
+  const std::vector<const Keyframe*> qn = neighbours(query, &qcams);
+  const std::vector<const Keyframe*> cn = neighbours(candidate, &ccams);
+  const auto t0 = Clock::now();
+  LoopClosureResult r = closer_.close(q->keyframe, qn, qcams, c->keyframe, cn, ccams);
+  timings_.add("loop_closure", msSince(t0));
+  if (!r.ok()) return std::nullopt;
+  LoopEdge e;
+  e.a = query;
+  e.b = candidate;
+  e.T_a_b = r.T_refQ_refC;
+  if (loop_hook_) loop_hook_(e.a, e.b, &e.T_a_b);
+  e.information = r.information;
+  e.covariance = r.covariance;
+  e.inliers = r.num_inliers;
+  e.depth_inliers = r.num_depth_inliers;
+  return e;
+}
+
 void MapManager::detectLoops(const KeyframeKey& key, MergeStats* stats) {
   const StoredKeyframe* q = map_.keyframe(key);
   auto t0 = Clock::now();
@@ -165,33 +205,45 @@ void MapManager::detectLoops(const KeyframeKey& key, MergeStats* stats) {
   timings_.add("place_recognition", msSince(t0));
   if (candidate_hook_) candidate_hook_(key, &places.candidates);
   stats->place_candidates += static_cast<int>(places.candidates.size());
-  std::vector<PinholeIntrinsics> qcams;
-  const std::vector<const Keyframe*> qn = neighbours(key, &qcams);
   int tried = 0;
   for (const PlaceCandidate& c : places.candidates) {
     if (tried >= params_.max_candidates_per_keyframe) break;
-    const StoredKeyframe* ck = map_.keyframe(c.key);
-    if (!ck || c.key == key) continue;
+    if (!map_.keyframe(c.key) || c.key == key) continue;
     ++tried;
     ++stats->loops_attempted;
-    std::vector<PinholeIntrinsics> ccams;
-    const std::vector<const Keyframe*> cn = neighbours(c.key, &ccams);
-    t0 = Clock::now();
-    LoopClosureResult r = closer_.close(q->keyframe, qn, qcams, ck->keyframe, cn, ccams);
-    timings_.add("loop_closure", msSince(t0));
-    if (!r.ok()) continue;
+    std::optional<LoopEdge> e = closeLoop(key, c.key);
+    if (!e) continue;
     ++stats->loops_geometric;
-    LoopEdge e;
-    e.id = next_loop_id_++;
-    e.a = key;
-    e.b = c.key;
-    e.T_a_b = r.T_refQ_refC;
-    if (loop_hook_) loop_hook_(e.a, e.b, &e.T_a_b);
-    e.information = r.information;
-    e.covariance = r.covariance;
-    e.inliers = r.num_inliers;
-    e.depth_inliers = r.num_depth_inliers;
-    map_.loops.push_back(e);
+    e->id = next_loop_id_++;
+    map_.loops.push_back(*e);
+  }
+}
+
+void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, MergeStats* stats) {
+  if (extended.empty()) return;
+  const std::set<KeyframeKey> ext(extended.begin(), extended.end());
+  for (const KeyframeKey& key : extended) {  // the database sees the new descriptors
+    const StoredKeyframe* kf = map_.keyframe(key);
+    recognizer_.remove(key);
+    (void)recognizer_.addBow(key, kf->keyframe.stamp, recognizer_.bow(kf->keyframe.descriptors));
+  }
+  // Loops whose rig holds an extended keyframe are closed again with its keypoints.
+  auto inRig = [&](const KeyframeKey& key) {
+    if (ext.count(key)) return true;
+    std::vector<PinholeIntrinsics> cams;
+    for (const Keyframe* n : neighbours(key, &cams))
+      if (ext.count(KeyframeKey{key.agent, key.session, n->id})) return true;
+    return false;
+  };
+  for (LoopEdge& loop : map_.loops) {
+    if (!inRig(loop.a) && !inRig(loop.b)) continue;
+    ++stats->loops_reverified;
+    std::optional<LoopEdge> e = closeLoop(loop.a, loop.b);
+    if (!e || e->inliers < loop.inliers) continue;  // keep the earlier measurement
+    e->id = loop.id;
+    e->accepted = loop.accepted;
+    loop = *e;
+    ++loops_replaced_;
   }
 }
 
@@ -325,15 +377,18 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
     return Error{"merge of submap seq " + std::to_string(submap.header.seq) + " from " +
                  hermes::toString(submap.header.agent) + ": " + v};
   MergeStats stats;
-  std::vector<KeyframeKey> added;
+  std::vector<KeyframeKey> added, extended;
   auto t0 = Clock::now();
-  storeSubmap(robot, submap, &added);
+  storeSubmap(robot, submap, &added, &extended, &stats);
   timings_.add("store", msSince(t0));
   stats.keyframes = static_cast<int>(added.size());
   stats.landmarks = static_cast<int>(submap.landmarks.size());
   const std::size_t loops_before = map_.loops.size();
+  const std::uint64_t replaced_before = loops_replaced_;
+  extendKeyframes(extended, &stats);
   for (const KeyframeKey& key : added) detectLoops(key, &stats);
-  if (map_.loops.size() != loops_before) {
+  if (loops_replaced_ != replaced_before) graph_dirty_ = true;  // a loop's measurement changed
+  if (map_.loops.size() != loops_before || loops_replaced_ != replaced_before) {
     t0 = Clock::now();
     runPcm();
     timings_.add("pcm", msSince(t0));

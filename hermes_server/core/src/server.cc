@@ -72,6 +72,9 @@ int Server::process(double now, int max_submaps) {
     } else {
       ++counters_.merged;
       ++merged;
+      counters_.keyframes_extended += static_cast<std::size_t>(stats->keyframes_extended);
+      counters_.extensions_unknown += static_cast<std::size_t>(stats->extensions_unknown);
+      counters_.loops_reverified += static_cast<std::size_t>(stats->loops_reverified);
     }
     (void)bookkeeper_.markApplied(r.robot, r.submap.header.session, r.submap.header.seq);
     timings_.add("submap", std::chrono::duration<double, std::milli>(

@@ -32,6 +32,10 @@ struct CoordinatorInput {
   /// unacknowledged and the window carries no deferred one (a deferral means the
   /// link is tight): only then may spare budget carry loop keypoints.
   bool link_keeps_up = false;
+  /// No acknowledgement has measured the link yet (B̂ is the start guess): a
+  /// window that would have carried loop keypoints on a link that keeps up
+  /// holds them back (DistillResult::held_back) for later keyframe extensions.
+  bool link_unmeasured = false;
   /// Time the window stands for [s]; 0 = one window period (distill.window_s). A
   /// window carrying deferred ones stands for all their periods: the link had
   /// that long for it (else the floor, which grows with the span, never fits).

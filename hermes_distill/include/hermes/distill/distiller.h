@@ -20,6 +20,7 @@
 #include <cstddef>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "hermes/core/config.h"
@@ -49,6 +50,8 @@ struct DistillReport {
   std::size_t observations = 0;
   int k = 0;                   ///< landmarks per keyframe targeted
   int loop_keypoints = 0;      ///< keypoints per keyframe sent without a landmark (spare budget)
+  int extension_keyframes = 0;   ///< earlier keyframes extended (extendWithHeldBack)
+  int extension_keypoints = 0;   ///< keypoints per extended keyframe (at most)
   double budget_bytes = 0;     ///< S (infinite with the coordinator off)
   double bytes_planned = 0;    ///< coordinator's prediction for its (N_KF, K) plan
   double bytes_predicted = 0;  ///< byte model of the sent submap
@@ -64,6 +67,10 @@ struct DistillReport {
 struct DistillResult {
   Submap submap;
   DistillReport report;
+  /// Set when the window was planned on an unmeasured link and would have
+  /// carried loop keypoints on one that keeps up: its kept keyframes with the
+  /// keypoints it did not send (heldBackKeypoints), for extendWithHeldBack.
+  std::optional<Submap> held_back;
 };
 
 class Distiller {
@@ -79,6 +86,13 @@ class Distiller {
   DistillResult distill(const Submap& window, const MotionHint& hint,
                         const CoordinatorInput& input);
 
+  /// Prepends keyframe extensions (see Submap) of an earlier window's held-back
+  /// keypoints to a distilled window `r` (not deferred): up to
+  /// distill.loop_keypoints per keyframe, within what is left of half the
+  /// window's budget (the window's own loop keypoints come first). Call it only
+  /// on a link that keeps up.
+  void extendWithHeldBack(const Submap& held, DistillResult* r) const;
+
   const ByteModel& byteModel() const { return model_; }
   const KeptModel& keptModel() const { return kept_; }
   const DistillParams& params() const { return params_; }
@@ -90,6 +104,12 @@ class Distiller {
   /// `fit` is unchanged otherwise.
   void addLoopKeypoints(const Submap& trimmed, const std::vector<int>& selected, Submap* fit,
                         DistillReport* rep) const;
+  /// Keypoints without a landmark on top of `*fit` within half the budget:
+  /// `build(n)` makes the candidate with up to n per keyframe over `n_kf`
+  /// keyframes; n halves once if the first candidate is too large. Returns the
+  /// n taken (0: `*fit` unchanged).
+  int spendSpareOnKeypoints(std::size_t n_kf, const std::function<Submap(std::size_t)>& build,
+                            Submap* fit, DistillReport* rep) const;
 
   DistillParams params_;
   EncodedSizeFn size_fn_;

@@ -67,5 +67,15 @@ inline constexpr std::size_t kAllKeypoints = static_cast<std::size_t>(-1);
 Submap keepLandmarks(const Submap& submap, const std::vector<int>& landmark_indices,
                      std::size_t extra_keypoints);
 
+/// What keepLandmarks(submap, landmark_indices, 0) leaves out: every keyframe
+/// with only its keypoints not linked to a kept landmark (links cleared); no
+/// landmarks, no odometry. Kept by the agent for later keyframe extensions.
+Submap heldBackKeypoints(const Submap& submap, const std::vector<int>& landmark_indices);
+
+/// Keyframe extensions (see Submap) of `held`'s keyframes: up to `n` of each
+/// one's keypoints, chosen as keepLandmarks chooses its extras. Keyframes left
+/// without a keypoint are omitted.
+std::vector<Keyframe> keyframeExtensions(const Submap& held, std::size_t n);
+
 }  // namespace distill
 }  // namespace hermes

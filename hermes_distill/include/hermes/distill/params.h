@@ -66,7 +66,7 @@ struct DistillParams {
   double window_s = 5.0;
   double probe_gain = 0.25;
   int k_max = 150;
-  int loop_keypoints = 300;
+  int loop_keypoints = 400;
   int k_min = 15;
   int k_pref = 60;
   double min_keyframe_rate_hz = 0.4;

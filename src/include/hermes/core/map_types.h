@@ -107,10 +107,17 @@ struct SubmapHeader {
 };
 
 /// One window of an agent's map, the unit of distillation and transmission.
+///
+/// Keyframe extensions: a keyframe stamped before header.t_start is not part of
+/// the window but extends a keyframe an earlier submap of the same session
+/// carried (same id): it brings keypoints only (descriptor + depth, no landmark
+/// link, no landmark observes it, no odometry edge names it), which the server
+/// appends to the stored keyframe. The agent sends them once a window planned
+/// before the link was measured turns out to have had room for them.
 struct Submap {
   SubmapHeader header;
   std::vector<PinholeIntrinsics> cameras;  ///< indexed by Keyframe::camera_id
-  std::vector<Keyframe> keyframes;         ///< ordered by stamp
+  std::vector<Keyframe> keyframes;         ///< ordered by stamp (extensions first)
   std::vector<Landmark> landmarks;
   std::vector<OdometryEdge> odometry;      ///< between consecutive kept keyframes
 
@@ -119,6 +126,10 @@ struct Submap {
   /// string when valid, otherwise a message naming the first problem.
   std::string validate() const;
   std::size_t observationCount() const;
+  /// True for a keyframe extension (stamped before the window's start).
+  bool isExtension(const Keyframe& kf) const { return kf.stamp < header.t_start; }
+  /// Keyframes of the window itself (extensions not counted).
+  std::size_t windowKeyframeCount() const;
 };
 
 }  // namespace hermes

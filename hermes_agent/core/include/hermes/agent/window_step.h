@@ -37,6 +37,11 @@ struct WindowCounters {
   std::optional<Submap> carry;  ///< deferred / refused window waiting for the next
   int carry_periods = 0;        ///< window periods the carried window stands for
   double carry_stamp = 0;       ///< [s] when it was last deferred / refused
+  /// Keypoints a window planned before the link was measured held back
+  /// (DistillResult::held_back): the next window on a link that keeps up sends
+  /// them as keyframe extensions; once the link is measured otherwise they go.
+  std::optional<Submap> held;
+  std::int64_t extended_keyframes = 0;  ///< keyframe extensions sent
 };
 
 template <typename T, typename = void>
@@ -88,6 +93,7 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
   in.backlog_bytes = sink ? sink->backlog_bytes : 0;
   in.loop_closures = sink ? sink->loop_closures : 0;
   in.link_keeps_up = sink && monitor.samples() > 0 && sink->backlog_bytes <= 0 && periods == 1;
+  in.link_unmeasured = sink && monitor.samples() == 0;
   in.period_s = periods * distiller.params().window_s;
   const auto t0 = std::chrono::steady_clock::now();
   distill::DistillResult r = distiller.distill(window, motion, in);
@@ -96,6 +102,15 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
   if (!r.report.ok) {
     ++counters->failed;
     return;
+  }
+  if (r.held_back) {
+    counters->held = std::move(r.held_back);
+  } else if (counters->held && in.link_keeps_up && !r.report.deferred) {
+    distiller.extendWithHeldBack(*counters->held, &r);
+    counters->extended_keyframes += r.report.extension_keyframes;
+    counters->held.reset();
+  } else if (counters->held && monitor.samples() > 0) {
+    counters->held.reset();  // the link is measured and has no room for them
   }
   auto keep = [&] {
     counters->carry = std::move(window);

@@ -45,6 +45,9 @@ struct MapManagerParams {
 
 struct MergeStats {
   int keyframes = 0, landmarks = 0;
+  int keyframes_extended = 0;  ///< stored keyframes that keyframe extensions added keypoints to
+  int extensions_unknown = 0;  ///< keyframe extensions of keyframes this map does not hold
+  int loops_reverified = 0;    ///< loops closed again after keyframe extensions
   int place_candidates = 0;
   int loops_attempted = 0, loops_geometric = 0;
   bool optimized = false;
@@ -78,9 +81,19 @@ class MapManager {
   void setLoopHook(LoopHook h) { loop_hook_ = std::move(h); }
 
  private:
-  void storeSubmap(RobotId robot, const Submap& submap, std::vector<KeyframeKey>* added);
+  /// Stores the window's new keyframes (`added`) and landmarks; keyframe
+  /// extensions append their keypoints to stored keyframes (`extended`).
+  void storeSubmap(RobotId robot, const Submap& submap, std::vector<KeyframeKey>* added,
+                   std::vector<KeyframeKey>* extended, MergeStats* stats);
   std::vector<const Keyframe*> neighbours(const KeyframeKey& key, std::vector<PinholeIntrinsics>* cams) const;
+  /// Place recognition + loop closure for a newly stored keyframe.
   void detectLoops(const KeyframeKey& key, MergeStats* stats);
+  /// The 17-point loop between two stored keyframes' rigs (no id yet), if verified.
+  std::optional<LoopEdge> closeLoop(const KeyframeKey& query, const KeyframeKey& candidate);
+  /// After keyframe extensions: their BoW entries are renewed and every loop
+  /// whose rig holds one is closed again; the new measurement replaces the old
+  /// one (same id, PCM decides again) unless it has fewer inliers.
+  void extendKeyframes(const std::vector<KeyframeKey>& extended, MergeStats* stats);
   void runPcm();
   bool updateAnchoring(const std::function<double(RobotId)>& credibility);
   void anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A);
@@ -95,6 +108,7 @@ class MapManager {
   GlobalMap map_;
   TimingStats timings_;
   std::uint64_t next_loop_id_ = 0;
+  std::uint64_t loops_replaced_ = 0;
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;
   std::set<std::uint64_t> accepted_;

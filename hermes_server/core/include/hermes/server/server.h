@@ -30,6 +30,9 @@ struct ServerParams {
 struct ServerCounters {
   std::size_t merged = 0;
   std::size_t merge_errors = 0;
+  std::size_t keyframes_extended = 0;  ///< stored keyframes keyframe extensions added keypoints to
+  std::size_t extensions_unknown = 0;  ///< extensions naming a keyframe the map does not hold
+  std::size_t loops_reverified = 0;    ///< loops closed again after extensions
   std::string last_error;
 };
 
