@@ -272,7 +272,8 @@ class AgentNodelet : public nodelet::Nodelet {
     j["replayed"] = keys(replayed_);
     j["pending"] = keys(up.buffer().pendingKeys());
     j["windows"] = {{"total", w.windows}, {"submitted", w.sent}, {"deferred", w.deferred},
-                    {"failed", w.failed}, {"refused", w.refused}};
+                    {"failed", w.failed}, {"refused", w.refused},
+                    {"extended_keyframes", w.extended_keyframes}};
     j["sends"] = up.stats().sends;
     j["resends"] = up.stats().resends;
     j["acked"] = up.stats().acked;
