@@ -222,6 +222,12 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     }
     if (done) break;
   }
+  // The last, partial sample period: the final window goes out after the last
+  // frame, and its bytes belong in the bandwidth series and its mean / peak.
+  if (now_ > next_sample_ + 1e-9) {
+    sample(now_);
+    next_sample_ += c.sample_period_s;
+  }
   // Whatever arrived is merged, and the graph is optimised once more.
   server_->process(now_);
   return server_->mapManager().optimize();

@@ -77,6 +77,12 @@ TEST(OfflineRun, ThreeRobotsMergeUnlimited) {
   ASSERT_TRUE(r.loop_accuracy.has_value());
   EXPECT_GT(r.loop_accuracy->inter_agent, 0u);
   EXPECT_LT(r.loop_accuracy->median_trans_m, 0.05);
+  // The bandwidth series holds every byte sent, the last window's too (it goes
+  // out after the last frame, in a partial sample period).
+  double series_bytes = 0;
+  for (const BandwidthSample& b : run->bandwidth()) series_bytes += b.kBps * 1000.0 * baseParams().clock.sample_period_s;
+  ASSERT_TRUE(r.metrics.bytes_total.has_value());
+  EXPECT_NEAR(series_bytes, static_cast<double>(*r.metrics.bytes_total), 1.0);
   // The results folder holds what the README promises.
   const std::string out = ::testing::TempDir() + "/hermes_offline_results";
   fs::remove_all(out);
