@@ -322,12 +322,10 @@ void Distiller::extendWithHeldBack(const Submap& held, DistillResult* r) const {
   const double window_start = r->submap.header.t_start;
   std::unordered_set<KeyframeId> in_window;
   for (const Keyframe& kf : r->submap.keyframes) in_window.insert(kf.id);
-  std::vector<const Keyframe*> earlier;  // only keyframes before this window can extend
+  Submap source;  // only keyframes before this window can extend
   for (const Keyframe& kf : held.keyframes)
-    if (kf.stamp < window_start && !in_window.count(kf.id)) earlier.push_back(&kf);
-  if (earlier.empty()) return;
-  Submap source;
-  for (const Keyframe* kf : earlier) source.keyframes.push_back(*kf);
+    if (kf.stamp < window_start && !in_window.count(kf.id)) source.keyframes.push_back(kf);
+  if (source.keyframes.empty()) return;
   const std::size_t before = r->submap.keyframes.size();
   rep.extension_keypoints = spendSpareOnKeypoints(
       source.keyframes.size(),

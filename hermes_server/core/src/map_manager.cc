@@ -243,7 +243,7 @@ void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, Merge
     e->id = loop.id;
     e->accepted = loop.accepted;
     loop = *e;
-    ++loops_replaced_;
+    ++stats->loops_replaced;
   }
 }
 
@@ -384,11 +384,10 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
   stats.keyframes = static_cast<int>(added.size());
   stats.landmarks = static_cast<int>(submap.landmarks.size());
   const std::size_t loops_before = map_.loops.size();
-  const std::uint64_t replaced_before = loops_replaced_;
   extendKeyframes(extended, &stats);
   for (const KeyframeKey& key : added) detectLoops(key, &stats);
-  if (loops_replaced_ != replaced_before) graph_dirty_ = true;  // a loop's measurement changed
-  if (map_.loops.size() != loops_before || loops_replaced_ != replaced_before) {
+  if (stats.loops_replaced > 0) graph_dirty_ = true;  // a loop's measurement changed
+  if (map_.loops.size() != loops_before || stats.loops_replaced > 0) {
     t0 = Clock::now();
     runPcm();
     timings_.add("pcm", msSince(t0));

@@ -48,6 +48,7 @@ struct MergeStats {
   int keyframes_extended = 0;  ///< stored keyframes that keyframe extensions added keypoints to
   int extensions_unknown = 0;  ///< keyframe extensions of keyframes this map does not hold
   int loops_reverified = 0;    ///< loops closed again after keyframe extensions
+  int loops_replaced = 0;      ///< of those, measurements replaced (not fewer inliers)
   int place_candidates = 0;
   int loops_attempted = 0, loops_geometric = 0;
   bool optimized = false;
@@ -108,7 +109,6 @@ class MapManager {
   GlobalMap map_;
   TimingStats timings_;
   std::uint64_t next_loop_id_ = 0;
-  std::uint64_t loops_replaced_ = 0;
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;
   std::set<std::uint64_t> accepted_;
