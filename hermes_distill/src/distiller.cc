@@ -102,7 +102,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   if (params_.strategy == "none") {
     std::vector<int> all(window.keyframes.size());
     std::iota(all.begin(), all.end(), 0);
-    Submap raw = applyKeyframeTrim(window, all, params_);
+    Submap raw = applyKeyframeTrim(window, all);
     raw.landmarks = window.landmarks;  // even landmarks without observations
     raw.keyframes = window.keyframes;
     rep.selection_status = toString(SolveStatus::kUnconstrained);
@@ -131,7 +131,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
 
   auto t0 = Clock::now();
   const TrimResult trim = trimKeyframes(window, n_kf, params_);
-  const Submap trimmed = applyKeyframeTrim(window, trim.kept, params_);
+  const Submap trimmed = applyKeyframeTrim(window, trim.kept);
   rep.trim_status = toString(trim.status);
   rep.time_trim_ms = msSince(t0);
   if (budgeted && !trimmed.keyframes.empty()) {  // K for the keyframes really kept

@@ -71,9 +71,6 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("trim_lambda", trim_lambda)
   HERMES_READ("trim_min_shared", trim_min_shared)
   HERMES_READ("trim_time_limit_s", trim_time_limit_s)
-  HERMES_READ("odom_sigma_trans", odom_sigma_trans)
-  HERMES_READ("odom_sigma_rot", odom_sigma_rot)
-  HERMES_READ("odom_shared_ref", odom_shared_ref)
   HERMES_READ("bytes_c0", bytes_c0)
   HERMES_READ("bytes_kf", bytes_kf)
   HERMES_READ("bytes_obs", bytes_obs)
@@ -110,8 +107,6 @@ Status DistillParams::validate() const {
   if (!(milp_time_limit_s > 0) || !(trim_time_limit_s > 0)) return bad("time limits must be > 0");
   if (trim_w_rot < 0 || trim_w_trans < 0) return bad("trim weights must be >= 0");
   if (trim_lambda < 0 || trim_min_shared < 1) return bad("trim_lambda >= 0, trim_min_shared >= 1");
-  if (!(odom_sigma_trans > 0) || !(odom_sigma_rot > 0) || odom_shared_ref < 1)
-    return bad("odometry sigmas must be > 0 and odom_shared_ref >= 1");
   if (bytes_c0 < 0 || bytes_kf < 0 || !(bytes_obs > 0) || !(bytes_lm > 0))
     return bad("byte model: c0, kf >= 0 and obs, lm > 0");
   return Status::Ok();
@@ -155,9 +150,6 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "trim_lambda", trim_lambda);
   out->set(p + "trim_min_shared", trim_min_shared);
   out->set(p + "trim_time_limit_s", trim_time_limit_s);
-  out->set(p + "odom_sigma_trans", odom_sigma_trans);
-  out->set(p + "odom_sigma_rot", odom_sigma_rot);
-  out->set(p + "odom_shared_ref", odom_shared_ref);
   out->set(p + "bytes_c0", bytes_c0);
   out->set(p + "bytes_kf", bytes_kf);
   out->set(p + "bytes_obs", bytes_obs);

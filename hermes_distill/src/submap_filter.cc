@@ -4,6 +4,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "hermes/core/odometry_noise.h"
 #include "hermes/distill/keyframe_trimming.h"
 
 namespace hermes {
@@ -24,8 +25,7 @@ int sharedLandmarks(const Submap& w, std::size_t a, std::size_t b) {
   return shared;
 }
 
-Submap applyKeyframeTrim(const Submap& w, const std::vector<int>& kept,
-                         const DistillParams& params) {
+Submap applyKeyframeTrim(const Submap& w, const std::vector<int>& kept) {
   Submap out;
   out.header = w.header;
   out.cameras = w.cameras;
@@ -47,16 +47,31 @@ Submap applyKeyframeTrim(const Submap& w, const std::vector<int>& kept,
   for (Keyframe& kf : out.keyframes)
     for (LandmarkId& id : kf.keypoint_landmark)
       if (id != kInvalidId && !kept_lms.count(id)) id = kInvalidId;
-  Mat6 prior = Mat6::Zero();
-  prior.diagonal().head<3>().setConstant(1.0 / (params.odom_sigma_trans * params.odom_sigma_trans));
-  prior.diagonal().tail<3>().setConstant(1.0 / (params.odom_sigma_rot * params.odom_sigma_rot));
-  for (std::size_t k = 1; k < out.keyframes.size(); ++k) {
+  // The window's edges by their first keyframe; kept keyframes in window order.
+  std::unordered_map<KeyframeId, const OdometryEdge*> edge_from;
+  for (const OdometryEdge& e : w.odometry) edge_from[e.from] = &e;
+  std::vector<int> order = kept;
+  std::sort(order.begin(), order.end());
+  for (std::size_t k = 1; k < order.size(); ++k) {
+    std::vector<RelativePoseCov> chain;
+    bool complete = true;
+    for (int j = order[k - 1]; j < order[k] && complete; ++j) {
+      auto it = edge_from.find(w.keyframes[static_cast<std::size_t>(j)].id);
+      complete = it != edge_from.end() && it->second->to == w.keyframes[static_cast<std::size_t>(j) + 1].id;
+      if (!complete) break;
+      auto cov = invertSpd(it->second->information);
+      complete = cov.ok();
+      if (complete) chain.push_back({it->second->T_from_to, *cov});
+    }
+    if (!complete) continue;  // the server bridges the gap from the poses
+    const RelativePoseCov c = composeEdges(chain);
+    auto info = invertSpd(c.covariance);
+    if (!info.ok()) continue;
     OdometryEdge e;
-    e.from = out.keyframes[k - 1].id;
-    e.to = out.keyframes[k].id;
-    e.T_from_to = out.keyframes[k - 1].T_A_C.inverse() * out.keyframes[k].T_A_C;
-    const double shared = sharedLandmarks(out, k - 1, k);
-    e.information = prior * std::clamp(shared / params.odom_shared_ref, 0.05, 1.0);
+    e.from = w.keyframes[static_cast<std::size_t>(order[k - 1])].id;
+    e.to = w.keyframes[static_cast<std::size_t>(order[k])].id;
+    e.T_from_to = c.T;
+    e.information = *info;
     out.odometry.push_back(e);
   }
   return out;

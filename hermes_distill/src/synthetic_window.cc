@@ -1,5 +1,7 @@
 #include "hermes/distill/synthetic_window.h"
 
+#include "hermes/core/odometry_noise.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -134,6 +136,15 @@ Expected<SyntheticWindow> SyntheticScene::window(double t_start_s, std::uint64_t
       kf.keypoint_landmark.push_back(kInvalidId);
     }
     s.keyframes.push_back(std::move(kf));
+  }
+  // Odometry edges as the agent's window has them (the default noise model).
+  for (std::size_t k = 1; k < s.keyframes.size(); ++k) {
+    OdometryEdge e;
+    e.from = s.keyframes[k - 1].id;
+    e.to = s.keyframes[k].id;
+    e.T_from_to = s.keyframes[k - 1].T_A_C.inverse() * s.keyframes[k].T_A_C;
+    e.information = odometryInformation(e.T_from_to, -1, false, OdometryNoiseParams());
+    s.odometry.push_back(e);
   }
   // Motion hint: the camera's last VO step (20 Hz) at the end of the window.
   SE3 T_W_B1, T_W_B0;

@@ -114,8 +114,8 @@ TEST(Coordinator, ChooseKFollowsTheKeyframesReallyKept) {
   const double budget = 0.3 * static_cast<double>(referenceEncodedSize(w.submap));
   std::vector<int> all(w.submap.keyframes.size());
   std::iota(all.begin(), all.end(), 0);
-  const Submap full = applyKeyframeTrim(w.submap, all, p);
-  const Submap half = applyKeyframeTrim(w.submap, {all.front(), all[all.size() / 2], all.back()}, p);
+  const Submap full = applyKeyframeTrim(w.submap, all);
+  const Submap half = applyKeyframeTrim(w.submap, {all.front(), all[all.size() / 2], all.back()});
   const CoordinatorPlan a = chooseK(full, budget, model, kept, p);
   const CoordinatorPlan b = chooseK(half, budget, model, kept, p);
   EXPECT_LE(a.predicted_bytes, budget);
@@ -379,6 +379,7 @@ TEST(Coordinator, DegenerateWindowsDoNotBreakAnyStrategy) {
   const SyntheticWindow w = testing::window("V1_01_easy", 110.0);
   Submap one = w.submap;  // a single keyframe
   one.keyframes.resize(1);
+  one.odometry.clear();
   for (auto& lm : one.landmarks) {
     std::vector<Observation> keep;
     for (const auto& ob : lm.observations)

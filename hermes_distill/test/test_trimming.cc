@@ -2,6 +2,7 @@
 // kept, N_KF respected, connectivity, and the submap surgery around it.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <limits>
 #include <set>
 #include <unordered_set>
@@ -118,7 +119,7 @@ TEST(Trimming, AppliedTrimDropsOrphansAndAddsOdometry) {
   DistillParams params;
   const Submap w = testing::window("MH_01_easy", 100.0).submap;
   const TrimResult r = trimKeyframes(w, 4, params);
-  const Submap t = applyKeyframeTrim(w, r.kept, params);
+  const Submap t = applyKeyframeTrim(w, r.kept);
   EXPECT_EQ(t.validate(), "");
   ASSERT_EQ(t.keyframes.size(), r.kept.size());
   std::unordered_set<KeyframeId> kept;
@@ -141,8 +142,18 @@ TEST(Trimming, AppliedTrimDropsOrphansAndAddsOdometry) {
     const SE3 T_A_to = t.keyframes[k].T_A_C * e.T_from_to;
     EXPECT_LT((T_A_to.translation() - t.keyframes[k + 1].T_A_C.translation()).norm(), 1e-9);
     EXPECT_GT(e.information(0, 0), 0.0);
-    EXPECT_LE(e.information(0, 0), 1.0 / (params.odom_sigma_trans * params.odom_sigma_trans) + 1e-6);
+    // Across dropped keyframes the edge is no more certain than the window's
+    // odometry between them: composed variances add up.
+    const auto first = std::find_if(w.odometry.begin(), w.odometry.end(),
+                                    [&](const OdometryEdge& o) { return o.from == e.from; });
+    ASSERT_NE(first, w.odometry.end());
+    if (first->to != e.to) EXPECT_LT(e.information(0, 0), first->information(0, 0));
+    else EXPECT_TRUE(e.information.isApprox(first->information));
   }
+  // Without the window's edges between two kept keyframes no edge is invented.
+  Submap no_edges = w;
+  no_edges.odometry.clear();
+  EXPECT_TRUE(applyKeyframeTrim(no_edges, r.kept).odometry.empty());
 }
 
 TEST(Trimming, KeepLandmarksReindexesKeypoints) {

@@ -139,7 +139,7 @@ int main(int argc, char** argv) {
       DistillParams params = base;
       // Selection only: trimmed to max_keyframes, K = 60, 40 % landmark budget.
       const TrimResult trim = trimKeyframes(win->submap, params.max_keyframes, params);
-      const Submap trimmed = applyKeyframeTrim(win->submap, trim.kept, params);
+      const Submap trimmed = applyKeyframeTrim(win->submap, trim.kept);
       const LandmarkScores scores = computeScores(trimmed, win->hint, 0, params);
       SelectionProblem prob = buildSelectionProblem(trimmed, scores, 60, INFINITY,
                                                     params.bytes_lm, params.bytes_obs, params);

@@ -50,6 +50,8 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     auto pipeline = agent::AgentPipeline::create(
         ap, src.name, agent::AgentCamera{info.K, info.baseline, info.T_B_C});
     if (!pipeline.ok()) return Error{pipeline.error()};
+    if (params.corrupt.active() && params.corrupt.agent == src.name)
+      (*pipeline)->setOdometryCorruption(params.corrupt);
     OfflineRun* self = run.get();
     Status s = (*pipeline)->attachUplink(
         [self, i](std::uint32_t session, std::uint64_t seq, const std::vector<std::uint8_t>& frame) {
@@ -68,6 +70,10 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     a.pipeline = std::move(*pipeline);
     run->agents_.push_back(std::move(a));
   }
+  if (params.corrupt.active() &&
+      std::none_of(run->agents_.begin(), run->agents_.end(),
+                   [&](const OfflineAgent& a) { return a.name == params.corrupt.agent; }))
+    return Error{"corrupt.agent '" + params.corrupt.agent + "' names no agent of this run"};
   return run;
 }
 

@@ -84,6 +84,35 @@ void loopAccuracy(const OfflineRun& run, RunResults* res) {
   res->loop_accuracy = acc;
 }
 
+/// The last pose-graph solve, edge by edge: how far each edge is from its
+/// measurement (metres, degrees, chi2 of its whitened error), the weight the
+/// robust loss left it, and for loops the error of the measurement itself
+/// against ground truth.
+void writeGraphEdges(const OfflineRun& run, std::ostream& o) {
+  const server::GraphDiagnostics& g = run.server().mapManager().graphDiagnostics();
+  o.precision(9);
+  o << "kind,agent_a,keyframe_a,agent_b,keyframe_b,stamp_a,stamp_b,residual_m,residual_deg,chi2,"
+       "weight,loop_error_m\n";
+  for (const server::EdgeResidual& e : g.edges) {
+    const OfflineAgent* a = agentOfRobot(run, e.a.agent);
+    const OfflineAgent* b = agentOfRobot(run, e.b.agent);
+    const server::StoredKeyframe* ka = run.server().map().keyframe(e.a);
+    const server::StoredKeyframe* kb = run.server().map().keyframe(e.b);
+    o << (e.loop ? "loop" : "odometry") << ',' << (a ? a->name : "?") << ',' << e.a.id << ','
+      << (b ? b->name : "?") << ',' << e.b.id << ','
+      << (ka && a ? ka->keyframe.stamp - a->clock_offset : 0.0) << ','
+      << (kb && b ? kb->keyframe.stamp - b->clock_offset : 0.0) << ',' << e.error_m << ','
+      << e.error_rad * 180.0 / M_PI << ',' << e.chi2 << ',' << e.weight << ',';
+    if (e.loop)
+      for (const server::LoopEdge& l : run.server().map().loops)
+        if (l.a == e.a && l.b == e.b) {
+          if (const auto c = checkLoop(run, l)) o << c->err_m;
+          break;
+        }
+    o << '\n';
+  }
+}
+
 std::string fmtNumber(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", v);
@@ -205,9 +234,20 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                            });
       !s)
     return s;
-  // ATE over time: every merged pose's error under the run's one common alignment.
+  // Error over time: every merged pose's error under the run's one common
+  // alignment (kind merged), and every odometry pose's error with the agent's
+  // odometry aligned on its own (kind odometry).
   std::ostringstream ate;
-  ate << "time_s,agent,error_m\n";
+  ate << "time_s,agent,kind,error_m\n";
+  for (const OfflineAgent& a : run.agents()) {
+    const Trajectory& gt = a.dataset->info().groundtruth;
+    if (gt.empty() || a.pipeline->trajectory().empty()) continue;
+    auto ev = eval::evaluateTrajectory(gt, a.pipeline->trajectory(), ep, a.name);
+    if (!ev.ok()) continue;
+    for (std::size_t i = 0; i < ev->ate.trans_errors_m.size(); ++i)
+      ate << ev->assoc.t[i] - a.clock_offset << ',' << a.name << ",odometry,"
+          << ev->ate.trans_errors_m[i] << '\n';
+  }
   if (!merged.empty()) {
     auto ev = eval::evaluateAgents(merged, ep, true);
     if (ev.ok())
@@ -219,7 +259,7 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
           return 0.0;
         }();
         for (std::size_t i = 0; i < r.trans_errors_m.size(); ++i)
-          ate << a.assoc.t[i] - t0 << ',' << a.name << ',' << r.trans_errors_m[i] << '\n';
+          ate << a.assoc.t[i] - t0 << ',' << a.name << ",merged," << r.trans_errors_m[i] << '\n';
       }
   }
   if (Status s = writeFile(out / "ate_over_time.csv", [&](std::ostream& o) { o << ate.str(); }); !s)
@@ -251,6 +291,10 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                                o << '\n';
                              }
                            });
+      !s)
+    return s;
+  if (Status s = writeFile(out / "pose_graph_edges.csv",
+                           [&](std::ostream& o) { writeGraphEdges(run, o); });
       !s)
     return s;
   if (Status s = run.server().map().save((out / "global_map.hgm").string()); !s) return s;

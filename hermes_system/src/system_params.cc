@@ -68,11 +68,13 @@ Status SystemParams::read(const Config& config) {
   if (Status s = server.read(config, "server."); !s) return Error{"server: " + s.error()};
   if (Status s = link.read(config); !s) return s;
   if (Status s = clock.read(config); !s) return s;
+  if (Status s = corrupt.read(config); !s) return s;
   return validate();
 }
 
 Status SystemParams::validate() const {
-  for (Status s : {run.validate(), server.validate(), link.validate(), clock.validate()})
+  for (Status s : {run.validate(), server.validate(), link.validate(), clock.validate(),
+                   corrupt.validate()})
     if (!s) return s;
   return Status::Ok();
 }
@@ -83,6 +85,7 @@ std::string SystemParams::yaml() const {
   server.write(w, "server.");
   link.write(w);
   clock.write(w);
+  corrupt.write(&w);
   return w.yaml();
 }
 

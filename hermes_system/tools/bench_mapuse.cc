@@ -340,7 +340,7 @@ int main(int argc, char** argv) {
     int budget_violations = 0;
     for (const Window* w : timed) {
       const distill::TrimResult trim = distill::trimKeyframes(w->submap, dp.max_keyframes, dp);
-      const Submap trimmed = distill::applyKeyframeTrim(w->submap, trim.kept, dp);
+      const Submap trimmed = distill::applyKeyframeTrim(w->submap, trim.kept);
       const distill::LandmarkScores sc = distill::computeScores(trimmed, w->hint, 0, dp);
       distill::SelectionProblem p = distill::buildSelectionProblem(
           trimmed, sc, 60, std::numeric_limits<double>::infinity(), dp.bytes_lm, dp.bytes_obs, dp);

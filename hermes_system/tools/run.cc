@@ -40,9 +40,10 @@ const char* kUsage =
     "  OUT/trajectories/<agent>_raw.tum     each agent's own odometry (body poses, TUM)\n"
     "  OUT/trajectories/<agent>_merged.tum  its keyframes in the merged world frame\n"
     "  OUT/trajectories/<agent>_gt.tum      the dataset's ground truth (body, TUM)\n"
-    "  OUT/bandwidth.csv, uplink_estimate.csv, ate_over_time.csv, loops.csv, global_map.ply,\n"
-    "  global_map.hgm (binary map: server::GlobalMap::load)\n"
-    "  OUT/plots/*.png                      top view, bandwidth, ATE over time\n"
+    "  OUT/bandwidth.csv, uplink_estimate.csv, ate_over_time.csv, loops.csv, pose_graph_edges.csv,\n"
+    "  global_map.ply, global_map.hgm (binary map: server::GlobalMap::load)\n"
+    "  OUT/plots/*.png                      top view, bandwidth, error over time (merged vs\n"
+    "                                       odometry), pose-graph residuals of the last solve\n"
     "<agent> is the dataset folder's name. --config: YAML (default: built-in defaults,\n"
     "see config/hermes.yaml); --set overrides one key (unknown keys are an error).\n"
     "--no-server: one agent, tracking only. --max-frames: at most N frames per agent.\n"
@@ -176,6 +177,8 @@ void drawPlots(const system::OfflineRun& run, const fs::path& out) {
                                 quote((plots / "bandwidth.png").string()));
   plot("plot_ate_time.py", "--csv " + quote((out / "ate_over_time.csv").string()) + " --out " +
                                quote((plots / "ate_over_time.png").string()));
+  plot("plot_pose_graph.py", "--csv " + quote((out / "pose_graph_edges.csv").string()) + " --out " +
+                                 quote((plots / "pose_graph.png").string()));
 }
 
 int runNoServer(const Args& args, system::SystemParams& params, std::unique_ptr<Dataset> dataset,

@@ -84,6 +84,7 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
     return Error{"agent " + name_ + ": frame stamp " + std::to_string(frame.stamp) +
                  " s is not after the previous one (" + std::to_string(last_stamp_) + " s)"};
   const auto t0 = std::chrono::steady_clock::now();
+  if (corruptor_ && corruptor_->noticedJumpAt(frame.stamp)) tracker_.markLost();
   auto result = tracker_.feed(frame);
   timings_.add("track", msSince(t0));
   if (!result.ok()) return Error{"agent " + name_ + ": " + result.error()};
@@ -91,7 +92,9 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
   ++frames_;
   if (result->status == TrackingStatus::kOk) {
     // Body pose in the odometry world: T_W_B = T_W_C * T_C_B.
-    trajectory_.push_back(StampedPose{frame.stamp, result->T_W_C * T_C_B_});
+    SE3 T_W_B = result->T_W_C * T_C_B_;
+    if (corruptor_) T_W_B = corruptor_->onFrame(frame.stamp, T_W_B) * T_W_B;
+    trajectory_.push_back(StampedPose{frame.stamp, T_W_B});
   } else {
     ++lost_;
   }
@@ -133,6 +136,11 @@ void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   else
     runWindowStep(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
   uplink_->poll(now);
+}
+
+void AgentPipeline::setOdometryCorruption(const OdometryCorruptionParams& params) {
+  corruptor_ = std::make_unique<OdometryCorruptor>(params);
+  tracker_.setWindowHook([c = corruptor_.get()](Submap* w) { c->apply(w); });
 }
 
 void AgentPipeline::retryCarriedWindow(double now) {

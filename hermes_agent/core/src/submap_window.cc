@@ -9,43 +9,26 @@
 namespace hermes {
 
 Status SubmapWindowParams::read(const Config& c) {
-  for (auto [key, ptr] : {std::pair<const char*, double*>{"period_s", &period_s},
-                          {"sigma_t_m", &sigma_t_m},
-                          {"sigma_r_rad", &sigma_r_rad}}) {
-    Status s = c.get(std::string("window.") + key, ptr);
-    if (!s) return s;
-  }
-  Status s = c.get("window.reference_shared", &reference_shared);
-  if (!s) return s;
+  if (Status s = c.get("window.period_s", &period_s); !s) return s;
+  if (Status s = odometry.read(c); !s) return s;
   return validate();
 }
 
 void SubmapWindowParams::write(ConfigWriter* w) const {
   w->set("window.period_s", period_s);
-  w->set("window.sigma_t_m", sigma_t_m);
-  w->set("window.sigma_r_rad", sigma_r_rad);
-  w->set("window.reference_shared", reference_shared);
+  odometry.write(w);
 }
 
 Status SubmapWindowParams::validate() const {
   if (!(period_s > 0)) return Error{"window.period_s must be > 0"};
-  if (!(sigma_t_m > 0)) return Error{"window.sigma_t_m must be > 0"};
-  if (!(sigma_r_rad > 0)) return Error{"window.sigma_r_rad must be > 0"};
-  if (reference_shared < 1) return Error{"window.reference_shared must be >= 1"};
+  if (Status s = odometry.validate(); !s) return Error{"odometry: " + s.error()};
   return Status::Ok();
 }
 
-Mat6 odometryInformation(int shared, const SubmapWindowParams& p) {
-  const double w = double(std::max(shared, 1)) / p.reference_shared;
-  Vec6 d;
-  d << Vec3::Constant(1 / (p.sigma_t_m * p.sigma_t_m)),
-      Vec3::Constant(1 / (p.sigma_r_rad * p.sigma_r_rad));
-  return Mat6(w * d.asDiagonal());
-}
-
 Submap buildWindow(const std::vector<Keyframe>& kfs, const std::vector<Landmark>& lms,
-                   std::size_t first, std::size_t last, const PinholeIntrinsics& K,
-                   SubmapHeader header, const SubmapWindowParams& params) {
+                   const std::vector<char>& lost_before, std::size_t first, std::size_t last,
+                   const PinholeIntrinsics& K, SubmapHeader header,
+                   const SubmapWindowParams& params) {
   Submap s;
   last = std::min(last, kfs.size());
   s.cameras = {K};
@@ -83,7 +66,9 @@ Submap buildWindow(const std::vector<Keyframe>& kfs, const std::vector<Landmark>
     e.from = kfs[k - 1].id;
     e.to = kfs[k].id;
     e.T_from_to = kfs[k - 1].T_A_C.inverse() * kfs[k].T_A_C;
-    e.information = odometryInformation(sharedLandmarks(kfs, lms, k - 1, k), params);
+    const bool lost = k < lost_before.size() && lost_before[k];
+    e.information = odometryInformation(e.T_from_to, sharedLandmarks(kfs, lms, k - 1, k), lost,
+                                        params.odometry);
     s.odometry.push_back(e);
   }
   return s;

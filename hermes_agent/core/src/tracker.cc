@@ -144,6 +144,8 @@ void Tracker::insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& f
   (void)associated;
   reference_tracked_ = 0;  // set by the next tracked frame
   keyframes_.push_back(std::move(kf));
+  lost_before_.push_back(lost_since_keyframe_ ? 1 : 0);
+  lost_since_keyframe_ = false;
 }
 
 std::vector<std::size_t> Tracker::localMap(int keyframes) const {
@@ -245,6 +247,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   }
   if (!est.ok() || est->num_inliers < params_.min_tracked) {
     status_ = TrackingStatus::kLost;
+    lost_since_keyframe_ = true;
     have_velocity_ = false;
     r.status = status_;
     r.tracked = est.ok() ? est->num_inliers : 0;
@@ -319,8 +322,9 @@ std::optional<Submap> Tracker::takeWindowIfDue(double t) {
   }
   if (t - window_last_t_ < params_.window.period_s || window_next_kf_ >= keyframes_.size())
     return std::nullopt;
-  Submap s = buildWindow(keyframes_, landmarks_, window_next_kf_, keyframes_.size(), K_,
-                         window_header_, params_.window);
+  Submap s = buildWindow(keyframes_, landmarks_, lost_before_, window_next_kf_, keyframes_.size(),
+                         K_, window_header_, params_.window);
+  if (window_hook_) window_hook_(&s);
   ++window_header_.seq;
   window_next_kf_ = keyframes_.size();
   window_last_t_ = t;

@@ -77,15 +77,42 @@ TEST(SubmapWindow, ConsecutiveWindowsAreValidAndChain) {
   EXPECT_FALSE(tracker.takeWindowIfDue(200.0).has_value());
 }
 
-TEST(SubmapWindow, OdometryInformationGrowsWithSharedLandmarks) {
+TEST(SubmapWindow, ParamsValidate) {
   SubmapWindowParams p;
-  const Mat6 a = odometryInformation(50, p), b = odometryInformation(200, p);
-  EXPECT_NEAR(b(0, 0) / a(0, 0), 4.0, 1e-12);
-  EXPECT_NEAR(odometryInformation(p.reference_shared, p)(0, 0), 1 / (p.sigma_t_m * p.sigma_t_m), 1e-9);
-  EXPECT_NEAR(odometryInformation(p.reference_shared, p)(5, 5), 1 / (p.sigma_r_rad * p.sigma_r_rad), 1e-6);
-  EXPECT_GT(odometryInformation(0, p)(0, 0), 0);  // clamped, never singular
+  EXPECT_TRUE(p.validate().ok());
   p.period_s = 0;
   EXPECT_FALSE(p.validate().ok());
+  p.period_s = 5;
+  p.odometry.trans_floor_m = 0;
+  EXPECT_FALSE(p.validate().ok());
+}
+
+TEST(SubmapWindow, EdgesFollowTheOdometryNoiseModelAndLostFrames) {
+  // Three keyframes 0.5 m apart sharing plenty of landmarks; tracking was lost
+  // between the second and the third.
+  std::vector<Keyframe> kfs(3);
+  std::vector<Landmark> lms(60);
+  for (std::size_t k = 0; k < kfs.size(); ++k) {
+    kfs[k].id = k;
+    kfs[k].stamp = double(k);
+    kfs[k].T_A_C = SE3(Quat::Identity(), Vec3(0.5 * k, 0, 0));
+  }
+  for (std::size_t i = 0; i < lms.size(); ++i) {
+    lms[i].id = i;
+    lms[i].p_A = Vec3(0.1 * i, 1, 5);
+    for (std::size_t k = 0; k < kfs.size(); ++k) {
+      lms[i].observations.push_back({k, std::uint32_t(i)});
+      kfs[k].keypoints.push_back({float(i), 10.f, 0, 5.f});
+      kfs[k].descriptors.push_back({});
+      kfs[k].keypoint_landmark.push_back(i);
+    }
+  }
+  SubmapWindowParams p;
+  const Submap s = buildWindow(kfs, lms, {0, 0, 1}, 0, kfs.size(), test::roomK(), SubmapHeader(), p);
+  ASSERT_EQ(s.odometry.size(), 2u);
+  const Mat6 expected = odometryInformation(s.odometry[0].T_from_to, 60, false, p.odometry);
+  EXPECT_TRUE(s.odometry[0].information.isApprox(expected));
+  EXPECT_NEAR(s.odometry[0].information(0, 0) / s.odometry[1].information(0, 0), p.odometry.lost_inflation, 1e-6);
 }
 
 TEST(SubmapWindow, DeferredWindowMergesIntoTheNextAndCanBeBounded) {

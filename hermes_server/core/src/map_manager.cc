@@ -31,10 +31,7 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"min_world_loops", &min_world_loops}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
-  if (config.has(p + "odometry_sigma_m"))
-    if (Status s = config.get(p + "odometry_sigma_m", &odometry_sigma_m); !s) return s;
-  if (config.has(p + "odometry_sigma_rad"))
-    if (Status s = config.get(p + "odometry_sigma_rad", &odometry_sigma_rad); !s) return s;
+  if (Status s = odometry.read(config); !s) return s;
   if (Status s = validate(); !s) return Error{p + ": " + s.error()};
   return Status::Ok();
 }
@@ -48,8 +45,6 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "rig_neighbours", rig_neighbours);
   out.set(p + "max_candidates_per_keyframe", max_candidates_per_keyframe);
   out.set(p + "optimize_every_submaps", optimize_every_submaps);
-  out.set(p + "odometry_sigma_m", odometry_sigma_m);
-  out.set(p + "odometry_sigma_rad", odometry_sigma_rad);
   out.set(p + "min_world_loops", min_world_loops);
 }
 
@@ -57,8 +52,7 @@ Status MapManagerParams::validate() const {
   if (rig_neighbours < 1) return Error{"rig_neighbours must be >= 1"};
   if (max_candidates_per_keyframe < 0) return Error{"max_candidates_per_keyframe must be >= 0"};
   if (optimize_every_submaps < 0) return Error{"optimize_every_submaps must be >= 0"};
-  if (!(odometry_sigma_m > 0) || !(odometry_sigma_rad > 0))
-    return Error{"odometry sigmas must be > 0"};
+  if (Status s = odometry.validate(); !s) return Error{"odometry: " + s.error()};
   if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
   return Status::Ok();
 }
@@ -71,12 +65,8 @@ MapManager::MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerP
       recognizer_(vocabulary_, params_.place_recognition),
       closer_(params_.loop_closure) {}
 
-Mat6 MapManager::defaultOdometryInformation() const {
-  Mat6 info = Mat6::Zero();
-  info.diagonal().head<3>().setConstant(1.0 / (params_.odometry_sigma_m * params_.odometry_sigma_m));
-  info.diagonal().tail<3>().setConstant(1.0 /
-                                        (params_.odometry_sigma_rad * params_.odometry_sigma_rad));
-  return info;
+Mat6 MapManager::bridgeInformation(const Keyframe& from, const Keyframe& to) const {
+  return odometryInformation(from.T_A_C.inverse() * to.T_A_C, -1, false, params_.odometry);
 }
 
 void MapManager::storeSubmap(RobotId robot, const Submap& submap,
@@ -126,9 +116,11 @@ void MapManager::storeSubmap(RobotId robot, const Submap& submap,
     const KeyframeKey key = keyOf(t, kf->id);
     t.keyframes[kf->id] = std::move(sk);
     if (chain_.addKeyframe(key, kf->T_A_C) && last && t.keyframes.size() > 1) {
-      const KeyframeId prev_id = std::prev(t.keyframes.find(kf->id))->first;
+      const auto prev = std::prev(t.keyframes.find(kf->id));
+      const KeyframeId prev_id = prev->first;
       auto e = t.odometry.find({prev_id, kf->id});
-      const Mat6 info = e != t.odometry.end() ? e->second.information : defaultOdometryInformation();
+      const Mat6 info = e != t.odometry.end() ? e->second.information
+                                              : bridgeInformation(prev->second.keyframe, *kf);
       (void)chain_.addEdge(keyOf(t, prev_id), key, info);
     }
     added->push_back(key);
@@ -325,7 +317,6 @@ bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibili
 
 Status MapManager::optimize() {
   PoseGraph graph(params_.pose_graph);
-  const Mat6 default_info = defaultOdometryInformation();
   bool fixed = false;
   for (const auto& [tid, t] : map_.trajectories) {
     if (!t.anchored) continue;
@@ -342,7 +333,8 @@ Status MapManager::optimize() {
         auto e = t.odometry.find({prev_id, id});
         const SE3 T = e != t.odometry.end() ? e->second.T_from_to
                                             : prev->keyframe.T_A_C.inverse() * kf.keyframe.T_A_C;
-        const Mat6& info = e != t.odometry.end() ? e->second.information : default_info;
+        const Mat6 info = e != t.odometry.end() ? e->second.information
+                                                : bridgeInformation(prev->keyframe, kf.keyframe);
         if (Status s = graph.addOdometryEdge(keyOf(t, prev_id), key, T, info); !s) return s;
       }
       prev = &kf;
@@ -358,6 +350,10 @@ Status MapManager::optimize() {
   auto r = graph.optimize();
   timings_.add("pose_graph", msSince(t0));
   if (!r) return Error{"pose graph: " + r.error()};
+  graph_diag_.result = *r;
+  graph_diag_.edges = graph.residuals();
+  ++graph_diag_.solves;
+  if (!r->converged) ++graph_diag_.not_converged;
   for (auto& [tid, t] : map_.trajectories) {
     if (!t.anchored) continue;
     for (auto& [id, kf] : t.keyframes) {

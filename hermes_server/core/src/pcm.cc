@@ -1,8 +1,11 @@
 #include "hermes/server/pcm.h"
 
+#include <algorithm>
 #include <chrono>
 
 #include <Eigen/Cholesky>
+
+#include "hermes/core/odometry_noise.h"
 
 namespace hermes {
 namespace server {
@@ -16,6 +19,13 @@ std::string keyText(const KeyframeKey& k) {
 
 using TrajectoryId = std::pair<std::uint32_t, std::uint32_t>;
 TrajectoryId trajectoryOf(const KeyframeKey& k) { return {k.agent, k.session}; }
+
+/// Keyframe ids a clique's loops span on one trajectory.
+struct IdRange {
+  KeyframeId lo = kInvalidId, hi = 0;
+  void add(KeyframeId id) { lo = std::min(lo, id), hi = std::max(hi, id); }
+  bool overlaps(const IdRange& o) const { return lo <= o.hi && o.lo <= hi; }
+};
 
 /// The loop seen from b: T_b_a with the covariance of its right perturbation.
 LoopCandidate reversed(const LoopCandidate& l) {
@@ -34,7 +44,9 @@ Status PcmParams::read(const Config& config, const std::string& prefix) {
   const std::string p = prefix + ".";
   for (Status s : {config.get(p + "chi2_probability", &chi2_probability),
                    config.get(p + "exact_max_loops", &exact_max_loops),
-                   config.get(p + "min_clique_size", &min_clique_size)}) {
+                   config.get(p + "min_clique_size", &min_clique_size),
+                   config.get(p + "max_segments", &max_segments),
+                   config.get(p + "min_segment_size", &min_segment_size)}) {
     if (!s) return s;
   }
   if (Status s = validate(); !s) return Error{prefix + ": " + s.error()};
@@ -45,12 +57,16 @@ void PcmParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(prefix + ".chi2_probability", chi2_probability);
   w->set(prefix + ".exact_max_loops", exact_max_loops);
   w->set(prefix + ".min_clique_size", min_clique_size);
+  w->set(prefix + ".max_segments", max_segments);
+  w->set(prefix + ".min_segment_size", min_segment_size);
 }
 
 Status PcmParams::validate() const {
   if (!(chi2_probability > 0 && chi2_probability < 1)) return Error{"chi2_probability must be in (0, 1)"};
   if (exact_max_loops < 0 || exact_max_loops > 64) return Error{"exact_max_loops must be in [0, 64]"};
   if (min_clique_size < 1) return Error{"min_clique_size must be >= 1"};
+  if (max_segments < 1) return Error{"max_segments must be >= 1"};
+  if (min_segment_size < 1) return Error{"min_segment_size must be >= 1"};
   return Status::Ok();
 }
 
@@ -93,28 +109,18 @@ Expected<RelativePose> OdometryChain::relative(const KeyframeKey& from, const Ke
   const KeyframeId lo = forward ? from.id : to.id, hi = forward ? to.id : from.id;
   auto it_lo = traj.find(lo), it_hi = traj.find(hi);
   if (it_lo == traj.end() || it_hi == traj.end()) return Error{what + ": unknown keyframe"};
-  // T_lo_hi = E_0 E_1 ... E_{n-1}; walking backwards, G = product of the later
-  // edges, and each edge's perturbation enters as Ad(G^-1).
-  RelativePose out;
-  const SE3 T_lo_hi = it_lo->second.T_A_K.inverse() * it_hi->second.T_A_K;
-  SE3 G;  // T_{k+1}_hi
-  for (auto it = it_hi; it != it_lo;) {
-    auto prev = std::prev(it);
-    if (!prev->second.has_edge_to_next) {
-      return Error{what + ": missing odometry edge after keyframe " + std::to_string(prev->first)};
+  std::vector<RelativePoseCov> edges;
+  for (auto it = it_lo; it != it_hi; ++it) {
+    if (!it->second.has_edge_to_next) {
+      return Error{what + ": missing odometry edge after keyframe " + std::to_string(it->first)};
     }
-    const Mat6 A = G.inverse().adjoint();
-    out.covariance += A * prev->second.covariance_to_next * A.transpose();
-    G = prev->second.T_A_K.inverse() * it->second.T_A_K * G;
-    it = prev;
+    edges.push_back({it->second.T_A_K.inverse() * std::next(it)->second.T_A_K,
+                     it->second.covariance_to_next});
   }
-  if (forward) {
-    out.T = T_lo_hi;
-  } else {
-    const Mat6 Ad = T_lo_hi.adjoint();
-    out.T = T_lo_hi.inverse();
-    out.covariance = Ad * out.covariance * Ad.transpose();
-  }
+  const RelativePoseCov c = composeEdges(edges);
+  RelativePose out;
+  out.T = forward ? c.T : c.T.inverse();
+  out.covariance = forward ? c.covariance : invertedCovariance(c.T, c.covariance);
   return out;
 }
 
@@ -171,12 +177,38 @@ PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
         adj[i][j] = adj[j][i] = *d2 < gate;
       }
     }
-    bool exact = true;
-    const std::vector<int> clique = maximumClique(adj, params.exact_max_loops, &exact);
-    res.all_exact = res.all_exact && exact;
     std::vector<char> in(n, 0);
-    if (static_cast<int>(clique.size()) >= params.min_clique_size) {
+    std::vector<IdRange> ranges_a, ranges_b;  // of the accepted cliques
+    std::vector<int> rest(n);
+    for (int i = 0; i < n; ++i) rest[i] = i;
+    for (int segment = 0; segment < params.max_segments && !rest.empty(); ++segment) {
+      const int m = static_cast<int>(rest.size());
+      std::vector<std::vector<char>> sub(m, std::vector<char>(m, 0));
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; j < m; ++j) sub[i][j] = adj[rest[i]][rest[j]];
+      bool exact = true;
+      std::vector<int> clique = maximumClique(sub, params.exact_max_loops, &exact);
+      res.all_exact = res.all_exact && exact;
+      const int needed = segment == 0 ? params.min_clique_size
+                                      : std::max(params.min_clique_size, params.min_segment_size);
+      if (static_cast<int>(clique.size()) < needed) break;
+      for (int& v : clique) v = rest[v];
+      IdRange ra, rb;
+      for (int v : clique) ra.add(group[v].a.id), rb.add(group[v].b.id);
+      auto apart = [](const IdRange& r, const std::vector<IdRange>& taken) {
+        for (const IdRange& t : taken)
+          if (r.overlaps(t)) return false;
+        return true;
+      };
+      if (segment > 0 && !apart(ra, ranges_a) && !apart(rb, ranges_b)) break;
+      if (segment > 0) ++res.segment_cliques;
+      ranges_a.push_back(ra);
+      ranges_b.push_back(rb);
       for (int v : clique) in[v] = 1;
+      std::vector<int> left;
+      for (int v : rest)
+        if (!in[v]) left.push_back(v);
+      rest = std::move(left);
     }
     for (int i = 0; i < n; ++i) (in[i] ? res.accepted : res.rejected).push_back(group[i].id);
   }

@@ -1,7 +1,9 @@
 #include "hermes/server/pose_graph.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <map>
 #include <memory>
 
 namespace hermes {
@@ -11,6 +13,12 @@ Status PoseGraphParams::read(const Config& config, const std::string& prefix) {
   const std::string p = prefix + ".";
   for (Status s : {config.getChoice(p + "loop_loss", {"none", "huber", "cauchy"}, &loop_loss),
                    config.get(p + "loop_loss_scale", &loop_loss_scale),
+                   config.getChoice(p + "odometry_loss", {"none", "huber", "cauchy"}, &odometry_loss),
+                   config.get(p + "odometry_loss_scale", &odometry_loss_scale),
+                   config.get(p + "odometry_reweight_rounds", &odometry_reweight_rounds),
+                   config.get(p + "odometry_reweight_window", &odometry_reweight_window),
+                   config.get(p + "odometry_reweight_max", &odometry_reweight_max),
+                   config.get(p + "odometry_reweight_floor", &odometry_reweight_floor),
                    config.get(p + "anneal_steps", &anneal_steps),
                    config.get(p + "anneal_factor", &anneal_factor),
                    config.get(p + "max_iterations", &max_iterations),
@@ -26,6 +34,12 @@ void PoseGraphParams::write(ConfigWriter* w, const std::string& prefix) const {
   const std::string p = prefix + ".";
   w->set(p + "loop_loss", loop_loss);
   w->set(p + "loop_loss_scale", loop_loss_scale);
+  w->set(p + "odometry_loss", odometry_loss);
+  w->set(p + "odometry_loss_scale", odometry_loss_scale);
+  w->set(p + "odometry_reweight_rounds", odometry_reweight_rounds);
+  w->set(p + "odometry_reweight_window", odometry_reweight_window);
+  w->set(p + "odometry_reweight_max", odometry_reweight_max);
+  w->set(p + "odometry_reweight_floor", odometry_reweight_floor);
   w->set(p + "anneal_steps", anneal_steps);
   w->set(p + "anneal_factor", anneal_factor);
   w->set(p + "max_iterations", max_iterations);
@@ -38,6 +52,14 @@ Status PoseGraphParams::validate() const {
     return Error{"loop_loss must be none, huber or cauchy (got '" + loop_loss + "')"};
   }
   if (!(loop_loss_scale > 0)) return Error{"loop_loss_scale must be > 0"};
+  if (odometry_loss != "none" && odometry_loss != "huber" && odometry_loss != "cauchy") {
+    return Error{"odometry_loss must be none, huber or cauchy (got '" + odometry_loss + "')"};
+  }
+  if (!(odometry_loss_scale > 0)) return Error{"odometry_loss_scale must be > 0"};
+  if (odometry_reweight_rounds < 0) return Error{"odometry_reweight_rounds must be >= 0"};
+  if (odometry_reweight_window < 0) return Error{"odometry_reweight_window must be >= 0"};
+  if (!(odometry_reweight_max >= 1)) return Error{"odometry_reweight_max must be >= 1"};
+  if (!(odometry_reweight_floor > 0)) return Error{"odometry_reweight_floor must be > 0"};
   if (anneal_steps < 1) return Error{"anneal_steps must be >= 1"};
   if (!(anneal_factor >= 1)) return Error{"anneal_factor must be >= 1"};
   if (max_iterations < 1) return Error{"max_iterations must be >= 1"};
@@ -60,6 +82,19 @@ Expected<Mat6> sqrtInformation(const Mat6& information) {
 }
 
 namespace {
+ceres::LossFunction* makeLoss(const std::string& kind, double scale) {
+  if (kind == "huber") return new ceres::HuberLoss(scale);
+  if (kind == "cauchy") return new ceres::CauchyLoss(scale);
+  return nullptr;
+}
+
+/// rho'(s) of the loss at squared norm s (scale c): the weight it gives the edge.
+double robustWeight(const std::string& kind, double c, double s) {
+  if (kind == "huber") return s <= c * c ? 1.0 : c / std::sqrt(s);
+  if (kind == "cauchy") return 1.0 / (1.0 + s / (c * c));
+  return 1.0;
+}
+
 std::string toString(const KeyframeKey& key) {
   return "(agent " + std::to_string(key.agent) + ", session " + std::to_string(key.session) +
          ", keyframe " + std::to_string(key.id) + ")";
@@ -134,7 +169,72 @@ Expected<PoseGraphResult> PoseGraph::optimize() {
   if (Status s = params_.validate(); !s) return Error{"pose graph: " + s.error()};
   if (odometry_.empty() && loops_.empty()) return Error{"pose graph: no edges to optimise"};
   const auto t0 = std::chrono::steady_clock::now();
+  odometry_scale_.assign(odometry_.size(), 1.0);
+  PoseGraphResult res;
+  for (int round = 0;; ++round) {
+    // The first round anneals the robust losses from large scales; later rounds
+    // start from its solution at the final scales.
+    Expected<PoseGraphResult> r = solve(round == 0);
+    if (!r) return r;
+    if (round == 0) res.initial_cost = r->initial_cost;
+    res.final_cost = r->final_cost;
+    res.iterations += r->iterations;
+    res.converged = r->converged;
+    res.termination = r->termination;
+    res.report = r->report;
+    res.reweight_rounds = round;
+    if (round >= params_.odometry_reweight_rounds || !reweightOdometry()) break;
+  }
+  res.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
 
+bool PoseGraph::reweightOdometry() {
+  // Squared whitened error of every odometry edge under its own information,
+  // grouped by trajectory in key order; per edge, the mean chi2 per degree of
+  // freedom of the edges within +-window of it on its trajectory.
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::pair<KeyframeKey, std::size_t>>> traj;
+  for (std::size_t i = 0; i < odometry_.size(); ++i)
+    traj[{odometry_[i].a.agent, odometry_[i].a.session}].emplace_back(odometry_[i].a, i);
+  std::vector<double> chi2(odometry_.size()), local(odometry_.size(), 0.0);
+  for (std::size_t i = 0; i < odometry_.size(); ++i) chi2[i] = edgeChi2(odometry_[i]);
+  const int w = params_.odometry_reweight_window;
+  for (auto& [id, edges] : traj) {
+    std::sort(edges.begin(), edges.end());
+    const int n = static_cast<int>(edges.size());
+    for (int k = 0; k < n; ++k) {
+      double sum = 0;
+      int count = 0;
+      for (int j = std::max(0, k - w); j <= std::min(n - 1, k + w); ++j, ++count) sum += chi2[edges[j].second];
+      local[edges[k].second] = sum / (6.0 * count);
+    }
+  }
+  if (local.empty()) return false;
+  // The typical level: most odometry is sound. A stretch whose edges disagree
+  // with the loops that much more than the typical one is trusted that much
+  // less (bounded); sound stretches keep their information.
+  std::vector<double> sorted = local;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double typical = std::max(sorted[sorted.size() / 2], params_.odometry_reweight_floor);
+  bool changed = false;
+  for (std::size_t i = 0; i < odometry_.size(); ++i) {
+    const double scale = std::clamp(local[i] / typical, 1.0, params_.odometry_reweight_max);
+    double& current = odometry_scale_[i];
+    if (std::abs(scale - current) > 0.1 * current) changed = true;
+    current = scale;
+  }
+  return changed;
+}
+
+double PoseGraph::edgeChi2(const Edge& e) const {
+  const Node& a = nodes_.at(e.a);
+  const Node& b = nodes_.at(e.b);
+  double r[6];
+  RelativePoseError(e.T_a_b, e.sqrt_information)(a.q.data(), a.t.data(), b.q.data(), b.t.data(), r);
+  return Eigen::Map<const Vec6>(r).squaredNorm();
+}
+
+Expected<PoseGraphResult> PoseGraph::solve(bool anneal) {
   ceres::Problem::Options popt;
   popt.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   popt.loss_function_ownership = ceres::TAKE_OWNERSHIP;
@@ -147,29 +247,28 @@ Expected<PoseGraphResult> PoseGraph::optimize() {
       problem.AddParameterBlock(n.t.data(), 3);
     }
   };
-  auto addResidual = [&](const Edge& e, ceres::LossFunction* loss) {
+  auto addResidual = [&](const Edge& e, double scale, ceres::LossFunction* loss) {
     Node& a = nodes_.at(e.a);
     Node& b = nodes_.at(e.b);
     addBlocks(a);
     addBlocks(b);
-    problem.AddResidualBlock(RelativePoseError::create(e.T_a_b, e.sqrt_information), loss,
-                             a.q.data(), a.t.data(), b.q.data(), b.t.data());
+    problem.AddResidualBlock(RelativePoseError::create(e.T_a_b, e.sqrt_information / std::sqrt(scale)),
+                             loss, a.q.data(), a.t.data(), b.q.data(), b.t.data());
   };
-  for (const Edge& e : odometry_) addResidual(e, nullptr);
-  // One loss shared by all loop edges; its scale is annealed between solves.
-  auto makeLoss = [&](double scale) -> ceres::LossFunction* {
-    if (params_.loop_loss == "huber") return new ceres::HuberLoss(scale);
-    if (params_.loop_loss == "cauchy") return new ceres::CauchyLoss(scale);
-    return nullptr;
+  // One loss per edge kind, shared by its edges; the scales are annealed
+  // between solves (continuation: large scales first, the final ones last).
+  const int stages = anneal && robust() ? params_.anneal_steps : 1;
+  auto annealed = [&](double final_scale, int stage) {
+    return final_scale * std::pow(params_.anneal_factor, stages - 1 - stage);
   };
-  const bool robust = params_.loop_loss != "none";
-  const int stages = robust ? params_.anneal_steps : 1;
-  auto scaleOf = [&](int stage) {
-    return params_.loop_loss_scale * std::pow(params_.anneal_factor, stages - 1 - stage);
+  auto makeWrapper = [&](const std::string& kind, double final_scale) -> ceres::LossFunctionWrapper* {
+    if (kind == "none") return nullptr;
+    return new ceres::LossFunctionWrapper(makeLoss(kind, annealed(final_scale, 0)), ceres::TAKE_OWNERSHIP);
   };
-  ceres::LossFunctionWrapper* loop_loss =
-      robust ? new ceres::LossFunctionWrapper(makeLoss(scaleOf(0)), ceres::TAKE_OWNERSHIP) : nullptr;
-  for (const Edge& e : loops_) addResidual(e, loop_loss);
+  ceres::LossFunctionWrapper* odometry_loss = makeWrapper(params_.odometry_loss, params_.odometry_loss_scale);
+  ceres::LossFunctionWrapper* loop_loss = makeWrapper(params_.loop_loss, params_.loop_loss_scale);
+  for (std::size_t i = 0; i < odometry_.size(); ++i) addResidual(odometry_[i], odometry_scale_[i], odometry_loss);
+  for (const Edge& e : loops_) addResidual(e, 1.0, loop_loss);
 
   bool any_fixed = false;
   for (auto& [key, node] : nodes_) {
@@ -200,13 +299,22 @@ Expected<PoseGraphResult> PoseGraph::optimize() {
   double initial_cost = 0;
   int iterations = 0;
   for (int stage = 0; stage < stages; ++stage) {
-    if (loop_loss != nullptr && stage > 0) loop_loss->Reset(makeLoss(scaleOf(stage)), ceres::TAKE_OWNERSHIP);
+    if (stage > 0) {
+      if (odometry_loss)
+        odometry_loss->Reset(makeLoss(params_.odometry_loss, annealed(params_.odometry_loss_scale, stage)),
+                             ceres::TAKE_OWNERSHIP);
+      if (loop_loss)
+        loop_loss->Reset(makeLoss(params_.loop_loss, annealed(params_.loop_loss_scale, stage)),
+                         ceres::TAKE_OWNERSHIP);
+    }
     ceres::Solve(opt, &problem, &summary);
     if (stage == 0) initial_cost = summary.initial_cost;
     iterations += static_cast<int>(summary.iterations.size());
     if (!summary.IsSolutionUsable()) break;
   }
-  if (loops_.empty()) delete loop_loss;  // never handed to the problem
+  // A wrapper never handed to the problem is ours to delete.
+  if (odometry_.empty()) delete odometry_loss;
+  if (loops_.empty()) delete loop_loss;
 
   for (auto& [key, node] : nodes_) {  // keep quaternions normalised for readers
     Eigen::Map<Eigen::Vector4d> q(node.q.data());
@@ -217,10 +325,41 @@ Expected<PoseGraphResult> PoseGraph::optimize() {
   res.final_cost = summary.final_cost;
   res.iterations = iterations;
   res.converged = summary.termination_type == ceres::CONVERGENCE;
+  res.termination = ceres::TerminationTypeToString(summary.termination_type);
   res.report = summary.BriefReport();
-  res.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   if (!summary.IsSolutionUsable()) return Error{"pose graph: solver failed: " + res.report};
   return res;
+}
+
+bool PoseGraph::robust() const {
+  return params_.loop_loss != "none" || params_.odometry_loss != "none";
+}
+
+std::vector<EdgeResidual> PoseGraph::residuals() const {
+  std::vector<EdgeResidual> out;
+  auto add = [&](const Edge& e, bool loop, double scale) {
+    const Node& a = nodes_.at(e.a);
+    const Node& b = nodes_.at(e.b);
+    const SE3 Ta(Quat(a.q[3], a.q[0], a.q[1], a.q[2]), Vec3(a.t[0], a.t[1], a.t[2]));
+    const SE3 Tb(Quat(b.q[3], b.q[0], b.q[1], b.q[2]), Vec3(b.t[0], b.t[1], b.t[2]));
+    const SE3 err = e.T_a_b.inverse() * Ta.inverse() * Tb;
+    double r[6];
+    RelativePoseError(e.T_a_b, e.sqrt_information)(a.q.data(), a.t.data(), b.q.data(), b.t.data(), r);
+    EdgeResidual x;
+    x.a = e.a;
+    x.b = e.b;
+    x.loop = loop;
+    x.error_m = err.translation().norm();
+    x.error_rad = rotationAngle(err.rotation());
+    x.chi2 = Eigen::Map<const Vec6>(r).squaredNorm();
+    x.weight = loop ? robustWeight(params_.loop_loss, params_.loop_loss_scale, x.chi2)
+                    : robustWeight(params_.odometry_loss, params_.odometry_loss_scale, x.chi2 / scale) / scale;
+    out.push_back(x);
+  };
+  for (std::size_t i = 0; i < odometry_.size(); ++i)
+    add(odometry_[i], false, i < odometry_scale_.size() ? odometry_scale_[i] : 1.0);
+  for (const Edge& e : loops_) add(e, true, 1.0);
+  return out;
 }
 
 Expected<SE3> PoseGraph::pose(const KeyframeKey& key) const {

@@ -243,6 +243,89 @@ TEST(Pcm, OdometryChainComposesCovariance) {
   EXPECT_LT((back->T * r->T).log().norm(), 1e-12);
 }
 
+/// Loops between agent 0 (sound odometry) and agent 1, whose odometry jumps
+/// by 0.5 m / 10 deg between keyframes `jump` and jump+1 without knowing it.
+struct JumpWorld {
+  World w;
+  std::vector<LoopCandidate> loops;
+};
+
+JumpWorld makeJumpWorld(std::mt19937& rng, int n, int jump) {
+  JumpWorld j;
+  World& w = j.w;
+  const double st = 0.005, sr = 0.1 * kDeg;
+  const SE3 kick(expSO3(Vec3(0, 0, 10 * kDeg)), Vec3(0.5, 0, 0));
+  for (std::uint32_t a = 0; a < 2; ++a) {
+    SE3 T_A_K;
+    for (int i = 0; i < n; ++i) {
+      const double th = 2 * M_PI * i / n;
+      const KeyframeKey key{a, 1, static_cast<KeyframeId>(i)};
+      w.truth[key] = SE3(expSO3(Vec3(0, 0, th + M_PI / 2)), Vec3((5 + 0.3 * a) * std::cos(th), 5 * std::sin(th), 0));
+      if (i > 0) {
+        const SE3 rel = w.truth.at(w.keys[a].back()).inverse() * w.truth.at(key);
+        T_A_K = T_A_K * rel * SE3::exp(noise(rng, st, sr)) * (a == 1 && i == jump + 1 ? kick : SE3());
+        EXPECT_TRUE(w.chain.addKeyframe(key, T_A_K).ok());
+        EXPECT_TRUE(w.chain.addEdge(w.keys[a].back(), key, diagCov(st, sr).inverse()).ok());
+      } else {
+        T_A_K = w.truth.at(key);
+        EXPECT_TRUE(w.chain.addKeyframe(key, T_A_K).ok());
+      }
+      w.keys[a].push_back(key);
+    }
+  }
+  for (int i = 1; i < n; i += 3) {  // right loops all along
+    LoopCandidate l;
+    l.id = j.loops.size();
+    l.a = w.keys[0][i];
+    l.b = w.keys[1][i - 1];
+    l.T_a_b = w.truth.at(l.a).inverse() * w.truth.at(l.b) * SE3::exp(noise(rng, 0.01, 0.2 * kDeg));
+    l.covariance = diagCov(0.01, 0.2 * kDeg);
+    j.loops.push_back(l);
+  }
+  return j;
+}
+
+TEST(Pcm, LoopsOnBothSidesOfAnOdometryJumpAreSegments) {
+  std::mt19937 rng(9);
+  JumpWorld j = makeJumpWorld(rng, 60, 35);
+  PcmParams p;
+  p.min_clique_size = 3;
+  const PcmResult classic = [&] {
+    PcmParams c = p;
+    c.max_segments = 1;
+    return selectConsistentLoops(j.loops, j.w.chain.query(), c);
+  }();
+  // Classic PCM keeps one side of the jump only.
+  EXPECT_LT(classic.accepted.size(), j.loops.size() - 5);
+  const PcmResult r = selectConsistentLoops(j.loops, j.w.chain.query(), p);
+  EXPECT_GE(r.segment_cliques, 1);
+  EXPECT_GE(r.accepted.size(), j.loops.size() - 1) << "accepted " << r.accepted.size() << " of " << j.loops.size();
+}
+
+TEST(Pcm, ASecondCliqueAmongTheFirstIsNotASegment) {
+  // Wrong loops that agree with each other but interleave with the right ones:
+  // no odometry break explains them, so they stay rejected.
+  std::mt19937 rng(10);
+  JumpWorld j = makeJumpWorld(rng, 60, 1000);  // no jump
+  const std::size_t right = j.loops.size();
+  const SE3 wrong_offset(expSO3(Vec3(0, 0, 25 * kDeg)), Vec3(1.5, -0.8, 0.2));
+  for (int i = 10; i < 50; i += 8) {
+    LoopCandidate l;
+    l.id = j.loops.size();
+    l.a = j.w.keys[0][i];
+    l.b = j.w.keys[1][i + 1];
+    l.T_a_b = j.w.truth.at(l.a).inverse() * wrong_offset * j.w.truth.at(l.b);
+    l.covariance = diagCov(0.01, 0.2 * kDeg);
+    j.loops.push_back(l);
+  }
+  PcmParams p;
+  p.min_clique_size = 3;
+  const PcmResult r = selectConsistentLoops(j.loops, j.w.chain.query(), p);
+  EXPECT_EQ(r.segment_cliques, 0);
+  for (auto id : r.accepted) EXPECT_LT(id, right) << "a wrong loop was accepted";
+  EXPECT_GE(r.accepted.size(), right - 1);
+}
+
 }  // namespace
 }  // namespace server
 }  // namespace hermes

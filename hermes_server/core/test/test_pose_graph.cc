@@ -198,6 +198,7 @@ TEST(PoseGraph, RobustLossSurvivesOneGrossOutlierLoop) {
     }
     PoseGraphParams params;
     params.loop_loss = variant == 2 ? "none" : "cauchy";
+    if (variant == 2) params.odometry_reweight_rounds = 0;  // no robust mechanism at all
     std::map<KeyframeKey, SE3> initial;
     PoseGraph pg = buildGraph(g, params, loops, rng, &initial);
     auto res = pg.optimize();

@@ -13,4 +13,10 @@ const std::vector<std::string>& hallSequences();
 /// rendered on first use under the temp dir. Empty when rendering failed.
 std::string renderedHall();
 
+/// Two robots (MH_01_easy, MH_02_easy) flying the same route through the hall,
+/// 40..70 s of their trajectories at 10 Hz: they meet all along (loops before
+/// and after any point). Rendered on first use; empty when rendering failed.
+std::string renderedMeeting();
+const std::vector<std::string>& meetingSequences();
+
 }  // namespace hermes::test_support

@@ -54,10 +54,12 @@ double trimObjective(const Submap& window, const std::vector<int>& kept,
 
 /// The window restricted to `kept` keyframes: observations by dropped keyframes
 /// removed, landmarks that no kept keyframe observes dropped (and their keypoint
-/// links cleared), odometry edges between consecutive kept keyframes with
-/// information = prior (σ_trans, σ_rot) · clamp(shared / odom_shared_ref, 0.05, 1).
-Submap applyKeyframeTrim(const Submap& window, const std::vector<int>& kept,
-                         const DistillParams& params);
+/// links cleared), odometry edges between consecutive kept keyframes: the
+/// window's edges between them composed with their covariances (composeEdges),
+/// so an edge across dropped keyframes is as uncertain as the odometry it
+/// stands for; where the window has no edge chain between two kept keyframes
+/// (windows merged after a deferral) none is sent and the server bridges them.
+Submap applyKeyframeTrim(const Submap& window, const std::vector<int>& kept);
 
 /// Keeps the landmarks with the given indices. Keyframes keep the keypoints
 /// linked to kept landmarks and, each, up to `extra_keypoints` others (with a

@@ -43,8 +43,6 @@
 //                             budget from binding as often)
 //   distill.fill_accept       a fitting selection at or above this fraction of S is
 //                             kept; below it (and K < k_max) K grows for another round [-]
-//   distill.odom_sigma_trans, distill.odom_sigma_rot  odometry prior [m], [rad]
-//   distill.odom_shared_ref   shared landmarks at which the prior information applies
 //   distill.bytes_c0, bytes_kf, bytes_obs, bytes_lm   initial byte model [B]
 #pragma once
 
@@ -101,11 +99,6 @@ struct DistillParams {
   double trim_lambda = 0.05;
   int trim_min_shared = 10;
   double trim_time_limit_s = 0.05;
-
-  // Odometry edges.
-  double odom_sigma_trans = 0.003;  // VO between keyframes is mm-accurate; looser lets loops bend it
-  double odom_sigma_rot = 0.001;
-  int odom_shared_ref = 50;
 
   // Initial byte model.
   double bytes_c0 = 256;

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "hermes/agent/odometry_corruption.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/core/config.h"
 #include "hermes/core/link_trace.h"
@@ -48,6 +49,7 @@ struct SystemParams {
   server::ServerParams server;    ///< section server
   LinkParams link;                ///< section link
   ClockParams clock;              ///< section system
+  agent::OdometryCorruptionParams corrupt;  ///< section corrupt (test hook)
 
   Status read(const Config& config);
   Status validate() const;

@@ -17,6 +17,7 @@
 #include <string>
 
 #include "hermes/agent/bandwidth_monitor.h"
+#include "hermes/agent/odometry_corruption.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/uplink_sender.h"
@@ -83,6 +84,9 @@ class AgentPipeline {
   void retryCarriedWindow(double now);
   /// A deferred / refused window waits to be sent.
   bool hasCarriedWindow() const { return windows_.carry.has_value(); }
+  /// Test hook: from now on the odometry (trajectory and windows) is corrupted
+  /// as `params` says (odometry_corruption.h). Call before the first frame.
+  void setOdometryCorruption(const OdometryCorruptionParams& params);
   /// Loops the server reports for this agent (the coordinator's alpha rule).
   void setLoopClosures(int loops) { loop_closures_ = loops; }
   /// Null until attachUplink().
@@ -119,6 +123,7 @@ class AgentPipeline {
   bool last_window_acked_ = false;
   std::int64_t frames_ = 0, lost_ = 0;
   BandwidthMonitor monitor_;
+  std::unique_ptr<OdometryCorruptor> corruptor_;
   WindowCounters windows_;
   double last_stamp_ = 0;
   TimingStats timings_;

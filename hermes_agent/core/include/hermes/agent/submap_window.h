@@ -1,11 +1,9 @@
 // Window extraction for distillation (DESIGN.md §3/§4): every period the agent
 // hands over the keyframes inserted since the previous window as a Submap.
 //
-// Odometry edge information: the relative pose between consecutive keyframes
-// is trusted in proportion to the landmarks they share. With n shared
-// landmarks, information = (n / reference_shared) · diag(1/σt², 1/σt², 1/σt²,
-// 1/σr², 1/σr², 1/σr²) ([rho; phi] order), n clamped to >= 1, i.e. σt, σr are
-// the standard deviations at `reference_shared` shared landmarks.
+// Odometry edge information: the odometry noise model (core/odometry_noise.h,
+// keys odometry.*) for the relative pose between consecutive keyframes, the
+// landmarks they share and whether tracking was lost between them.
 #pragma once
 
 #include <cstddef>
@@ -13,16 +11,15 @@
 
 #include "hermes/core/config.h"
 #include "hermes/core/map_types.h"
+#include "hermes/core/odometry_noise.h"
 
 namespace hermes {
 
 struct SubmapWindowParams {
   double period_s = 5.0;         ///< Δt between windows [s]
-  double sigma_t_m = 0.02;       ///< odometry translation sigma at reference_shared [m]
-  double sigma_r_rad = 0.005;    ///< odometry rotation sigma at reference_shared [rad]
-  int reference_shared = 100;
+  OdometryNoiseParams odometry;  ///< odometry.*
 
-  /// Keys under "window".
+  /// Keys window.period_s and odometry.*.
   Status read(const Config& config);
   void write(ConfigWriter* writer) const;
   Status validate() const;
@@ -31,14 +28,14 @@ struct SubmapWindowParams {
 /// Builds the submap of keyframes [first, last) of `keyframes` (ids = indices):
 /// keyframes copied with their current poses, landmark links outside the
 /// window's landmark set cleared, landmarks observed by them with observations
-/// restricted to the window, odometry edges between consecutive keyframes,
-/// cameras = {K}. header.t_start / t_end are set from the keyframe stamps.
+/// restricted to the window, odometry edges between consecutive keyframes
+/// (`lost_before[k]`: tracking was lost between keyframe k-1 and k; shorter
+/// than `keyframes` = not lost), cameras = {K}. header.t_start / t_end are set
+/// from the keyframe stamps.
 Submap buildWindow(const std::vector<Keyframe>& keyframes, const std::vector<Landmark>& landmarks,
-                   std::size_t first, std::size_t last, const PinholeIntrinsics& K,
-                   SubmapHeader header, const SubmapWindowParams& params);
-
-/// The information matrix documented above.
-Mat6 odometryInformation(int shared_landmarks, const SubmapWindowParams& params);
+                   const std::vector<char>& lost_before, std::size_t first, std::size_t last,
+                   const PinholeIntrinsics& K, SubmapHeader header,
+                   const SubmapWindowParams& params);
 
 /// One window made of a window that could not be sent (deferred: link down or
 /// too slow; refused: spool full) and the next one: keyframes of both (ids are

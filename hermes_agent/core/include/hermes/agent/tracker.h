@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -97,6 +98,12 @@ class Tracker {
   /// keyframe exists. Windows are consecutive: each starts with the keyframe
   /// after the previous window's last one.
   std::optional<Submap> takeWindowIfDue(double t);
+  /// Counts tracking as interrupted since the last keyframe (test hook: a
+  /// relocalisation the caller simulates); the next keyframe's odometry edge
+  /// is weakened as after a real loss.
+  void markLost() { lost_since_keyframe_ = true; }
+  /// Called on every window takeWindowIfDue hands out (test hooks).
+  void setWindowHook(std::function<void(Submap*)> hook) { window_hook_ = std::move(hook); }
   /// Latest VO motion for the distiller (valid after two consecutive tracked frames).
   distill::MotionHint motionHint() const;
 
@@ -119,6 +126,8 @@ class Tracker {
   std::vector<Landmark> landmarks_;
   std::vector<float> landmark_angle_;       ///< per landmark, last keypoint angle [deg]
   std::vector<KeyframeId> landmark_origin_; ///< keyframe that created it
+  std::vector<char> lost_before_;           ///< per keyframe: tracking was lost since the previous one
+  bool lost_since_keyframe_ = false;
   SE3 T_C_W_last_, T_C_W_prev_;             ///< last two tracked poses
   bool have_velocity_ = false;
   int reference_tracked_ = 0;
@@ -129,6 +138,7 @@ class Tracker {
   std::size_t window_next_kf_ = 0;
   double window_last_t_ = 0;
   bool window_started_ = false;
+  std::function<void(Submap*)> window_hook_;
 };
 
 }  // namespace hermes

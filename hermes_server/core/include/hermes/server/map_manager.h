@@ -14,6 +14,7 @@
 
 #include "hermes/core/config.h"
 #include "hermes/core/metrics.h"
+#include "hermes/core/odometry_noise.h"
 #include "hermes/server/bookkeeper.h"
 #include "hermes/server/global_map.h"
 #include "hermes/server/loop_closure.h"
@@ -33,8 +34,9 @@ struct MapManagerParams {
   int rig_neighbours = 2;              ///< m neighbours per rig side
   int max_candidates_per_keyframe = 2; ///< place candidates verified per keyframe
   int optimize_every_submaps = 10;     ///< also optimise after this many merges (0 = only on new loops)
-  double odometry_sigma_m = 0.01;      ///< odometry between submaps (no edge sent) [m]
-  double odometry_sigma_rad = 0.005;   ///< same, rotation [rad]
+  /// odometry.* (shared with the agents): bridges between windows, where no
+  /// edge was sent, get the model's information for their relative pose.
+  OdometryNoiseParams odometry;
   int min_world_loops = 3;             ///< accepted loops needed to anchor an agent
 
   MapManagerParams() { pcm.min_clique_size = 3; }
@@ -52,6 +54,15 @@ struct MergeStats {
   int place_candidates = 0;
   int loops_attempted = 0, loops_geometric = 0;
   bool optimized = false;
+};
+
+/// What the last pose-graph solve did (diagnostics: where the merged map departs
+/// from its measurements, which edges the robust losses gave up on).
+struct GraphDiagnostics {
+  PoseGraphResult result;
+  std::vector<EdgeResidual> edges;
+  int solves = 0;          ///< solves so far
+  int not_converged = 0;   ///< of those, ended without a convergence criterion
 };
 
 class MapManager {
@@ -73,6 +84,7 @@ class MapManager {
 
   const GlobalMap& map() const { return map_; }
   const TimingStats& timings() const { return timings_; }
+  const GraphDiagnostics& graphDiagnostics() const { return graph_diag_; }
   std::size_t loopsAccepted() const;
   std::size_t loopsRejected() const;
   bool hasLoops(RobotId robot) const;
@@ -98,7 +110,9 @@ class MapManager {
   void runPcm();
   bool updateAnchoring(const std::function<double(RobotId)>& credibility);
   void anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A);
-  Mat6 defaultOdometryInformation() const;
+  /// Information of the bridge between two keyframes of one trajectory that
+  /// no odometry edge joins (consecutive windows, or across trimmed ones).
+  Mat6 bridgeInformation(const Keyframe& from, const Keyframe& to) const;
 
   std::shared_ptr<const Vocabulary> vocabulary_;
   MapManagerParams params_;
@@ -108,6 +122,7 @@ class MapManager {
   OdometryChain chain_;
   GlobalMap map_;
   TimingStats timings_;
+  GraphDiagnostics graph_diag_;
   std::uint64_t next_loop_id_ = 0;
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;

@@ -9,6 +9,16 @@
 // bound up to `exact_max_loops` loops per group, beyond that a greedy heuristic
 // (grow a clique from each vertex by repeatedly adding the candidate with the
 // most neighbours among the remaining candidates; keep the largest).
+//
+// Segments: loops are judged through the odometry between them, so an odometry
+// jump the agent did not notice (or a drift beyond its noise model) splits the
+// right loops into groups that are consistent within, not across. After the
+// largest clique, further cliques of the remaining loops are accepted (largest
+// first, at most `max_segments` in all) when each holds at least
+// max(min_clique_size, min_segment_size) loops and lies on a stretch of one of the two trajectories that no accepted clique
+// overlaps (keyframe-id ranges disjoint): an odometry break between them
+// explains the inconsistency, and the pose graph's robust odometry loss lets
+// that break give way.
 #pragma once
 
 #include <cstdint>
@@ -29,6 +39,8 @@ struct PcmParams {
   double chi2_probability = 0.99;  ///< consistency gate: chi2 quantile of this probability
   int exact_max_loops = 40;        ///< exact maximum clique up to this many loops per group (<= 64)
   int min_clique_size = 1;         ///< a group's clique smaller than this is rejected
+  int max_segments = 4;            ///< cliques accepted per group at most (1 = the classic PCM)
+  int min_segment_size = 3;        ///< loops a clique beyond the first needs at least
 
   Status read(const Config& config, const std::string& prefix);
   void write(ConfigWriter* writer, const std::string& prefix) const;
@@ -78,6 +90,7 @@ struct PcmResult {
   std::vector<std::uint64_t> rejected;
   int groups = 0;               ///< trajectory pairs seen
   bool all_exact = true;        ///< false when some group used the greedy heuristic
+  int segment_cliques = 0;      ///< cliques accepted beyond the first (odometry breaks)
   int odometry_failures = 0;    ///< loop pairs whose odometry was unavailable (counted inconsistent)
   double time_ms = 0;
 };

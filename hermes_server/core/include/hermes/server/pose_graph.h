@@ -1,8 +1,11 @@
 // SE(3) pose graph over keyframes of all agents (DESIGN.md §5 "Pose graph"):
 // Ceres, quaternion (EigenQuaternionManifold) + translation per node, odometry and
-// loop edges as whitened 6-dof relative-pose residuals, robust loss on loop edges
-// only, SPARSE_NORMAL_CHOLESKY (SuiteSparse). The gauge is fixed by holding
-// chosen nodes constant (the anchor agent's first keyframe).
+// loop edges as whitened 6-dof relative-pose residuals, a robust loss on loop
+// edges (and optionally on odometry edges: an odometry jump the agent did not
+// notice then gives way to the loops on both sides), SPARSE_NORMAL_CHOLESKY
+// (SuiteSparse). The gauge is fixed by holding chosen nodes constant (the anchor
+// agent's first keyframe). After a solve, residuals() tells per edge how far
+// it is from its measurement and how much the robust loss weighs it.
 #pragma once
 
 #include <map>
@@ -20,8 +23,23 @@ namespace hermes {
 namespace server {
 
 struct PoseGraphParams {
-  std::string loop_loss = "cauchy";  ///< none | huber | cauchy (loop edges only)
+  std::string loop_loss = "cauchy";  ///< none | huber | cauchy (loop edges)
   double loop_loss_scale = 1.0;      ///< loss scale on the whitened residual norm [sigma]
+  std::string odometry_loss = "cauchy";  ///< none | huber | cauchy (odometry edges)
+  double odometry_loss_scale = 3.0;    ///< [sigma]
+  /// Odometry that disagrees with the loops more than the rest: after a solve,
+  /// each odometry edge gets the mean chi2 per degree of freedom of the edges
+  /// within +-window of it on its trajectory; its covariance is scaled by that
+  /// over the median of all edges' values (at least 1, at most reweight_max;
+  /// the median floored at reweight_floor), and the graph solved again; up to
+  /// this many rounds (0 = off). Least squares alone splits a drift among every
+  /// robot the loops tie together (the common frame bends); where one robot
+  /// drifts and the others agree with each other, its edges carry more of the
+  /// disagreement, and the rounds put all of it there.
+  int odometry_reweight_rounds = 5;
+  int odometry_reweight_window = 5;    ///< [edges] each side
+  double odometry_reweight_max = 100;  ///< largest covariance scale
+  double odometry_reweight_floor = 0.01;  ///< [chi2 per dof] floor of the median
   /// Continuation on the robust loss: solve with scales loop_loss_scale *
   /// anneal_factor^(anneal_steps-1), ..., loop_loss_scale. Without it, loops far
   /// from a drifted initial guess all look like outliers and are ignored.
@@ -88,8 +106,22 @@ struct PoseGraphResult {
   double final_cost = 0;
   int iterations = 0;             ///< summed over the annealing stages
   double time_ms = 0;
-  bool converged = false;
+  bool converged = false;         ///< the last stage ended by a convergence criterion
+  int reweight_rounds = 0;        ///< odometry re-weighting rounds done
+  std::string termination;        ///< Ceres termination of the last stage
   std::string report;  ///< Ceres brief report
+};
+
+/// One edge after a solve.
+struct EdgeResidual {
+  KeyframeKey a, b;
+  bool loop = false;
+  double error_m = 0;      ///< translation of T_meas^-1 T_a^-1 T_b [m]
+  double error_rad = 0;    ///< its rotation angle [rad]
+  double chi2 = 0;         ///< squared whitened error (under the edge's own information)
+  /// Weight the solve gave it relative to its own information: robust weight
+  /// rho' at the final scale, for odometry divided by its re-weighting scale (1 = fully trusted).
+  double weight = 1;
 };
 
 class PoseGraph {
@@ -122,6 +154,8 @@ class PoseGraph {
   std::size_t numNodes() const { return nodes_.size(); }
   std::size_t numOdometryEdges() const { return odometry_.size(); }
   std::size_t numLoopEdges() const { return loops_.size(); }
+  /// Every edge's residual at the current poses (odometry first, then loops).
+  std::vector<EdgeResidual> residuals() const;
 
  private:
   struct Node {
@@ -134,13 +168,20 @@ class PoseGraph {
     SE3 T_a_b;
     Mat6 sqrt_information;
   };
+  bool robust() const;  ///< some edge kind has a robust loss (annealing applies)
+  /// One solve (annealed robust losses when `anneal`) at the current odometry scales.
+  Expected<PoseGraphResult> solve(bool anneal);
+  /// Sets odometry_scale_ from the residuals; true when some scale changed by > 10 %.
+  bool reweightOdometry();
   Status addEdge(const KeyframeKey& a, const KeyframeKey& b, const SE3& T_a_b,
                  const Mat6& information, const char* kind, std::vector<Edge>* edges);
+  double edgeChi2(const Edge& e) const;
 
   PoseGraphParams params_;
   std::map<KeyframeKey, Node> nodes_;
   std::vector<Edge> odometry_;
   std::vector<Edge> loops_;
+  std::vector<double> odometry_scale_;  ///< per odometry edge, covariance scale of the re-weighting
 };
 
 }  // namespace server
