@@ -141,7 +141,9 @@ Outcome mergeRobots(Fault fault, bool noise_model, const PoseGraphParams& graph_
   EXPECT_TRUE(g.fixFirstPoseOf(0).ok());
   auto res = g.optimize();
   EXPECT_TRUE(res.ok()) << (res.ok() ? "" : res.error());
-  if (res.ok()) EXPECT_TRUE(res->converged) << res->termination << ": " << res->report;
+  if (res.ok()) {
+    EXPECT_TRUE(res->converged) << res->termination << ": " << res->report;
+  }
   if (std::getenv("HERMES_DEBUG_GRAPH")) {
     for (const EdgeResidual& e : g.residuals())
       if (e.loop || e.chi2 > 4)
