@@ -58,7 +58,7 @@ SE3 OdometryCorruptor::onFrame(double stamp, const SE3& T_W_B) {
     history_.emplace_back(stamp, C_);
   } else if (params_.kind == "drift" && t >= params_.at_s &&
              t <= params_.at_s + params_.drift_duration_s) {
-    if (have_prev_ && started_) travelled_m_ += (T_W_B.translation() - prev_T_W_B_.translation()).norm();
+    if (have_prev_) travelled_m_ += (T_W_B.translation() - prev_T_W_B_.translation()).norm();
     C_ = SE3(Quat::Identity(), Vec3(params_.drift_fraction * travelled_m_, 0, 0));
     history_.emplace_back(stamp, C_);
   }

@@ -338,20 +338,14 @@ bool PoseGraph::robust() const {
 std::vector<EdgeResidual> PoseGraph::residuals() const {
   std::vector<EdgeResidual> out;
   auto add = [&](const Edge& e, bool loop, double scale) {
-    const Node& a = nodes_.at(e.a);
-    const Node& b = nodes_.at(e.b);
-    const SE3 Ta(Quat(a.q[3], a.q[0], a.q[1], a.q[2]), Vec3(a.t[0], a.t[1], a.t[2]));
-    const SE3 Tb(Quat(b.q[3], b.q[0], b.q[1], b.q[2]), Vec3(b.t[0], b.t[1], b.t[2]));
-    const SE3 err = e.T_a_b.inverse() * Ta.inverse() * Tb;
-    double r[6];
-    RelativePoseError(e.T_a_b, e.sqrt_information)(a.q.data(), a.t.data(), b.q.data(), b.t.data(), r);
+    const SE3 err = e.T_a_b.inverse() * nodePose(nodes_.at(e.a)).inverse() * nodePose(nodes_.at(e.b));
     EdgeResidual x;
     x.a = e.a;
     x.b = e.b;
     x.loop = loop;
     x.error_m = err.translation().norm();
     x.error_rad = rotationAngle(err.rotation());
-    x.chi2 = Eigen::Map<const Vec6>(r).squaredNorm();
+    x.chi2 = edgeChi2(e);
     x.weight = loop ? robustWeight(params_.loop_loss, params_.loop_loss_scale, x.chi2)
                     : robustWeight(params_.odometry_loss, params_.odometry_loss_scale, x.chi2 / scale) / scale;
     out.push_back(x);
@@ -365,14 +359,13 @@ std::vector<EdgeResidual> PoseGraph::residuals() const {
 Expected<SE3> PoseGraph::pose(const KeyframeKey& key) const {
   auto it = nodes_.find(key);
   if (it == nodes_.end()) return Error{"pose graph: unknown node " + toString(key)};
-  const Node& n = it->second;
-  return SE3(Quat(n.q[3], n.q[0], n.q[1], n.q[2]), Vec3(n.t[0], n.t[1], n.t[2]));
+  return nodePose(it->second);
 }
 
 std::map<KeyframeKey, SE3> PoseGraph::poses() const {
   std::map<KeyframeKey, SE3> out;
   for (const auto& [key, n] : nodes_) {
-    out.emplace(key, SE3(Quat(n.q[3], n.q[0], n.q[1], n.q[2]), Vec3(n.t[0], n.t[1], n.t[2])));
+    out.emplace(key, nodePose(n));
   }
   return out;
 }

@@ -176,6 +176,9 @@ class PoseGraph {
   Status addEdge(const KeyframeKey& a, const KeyframeKey& b, const SE3& T_a_b,
                  const Mat6& information, const char* kind, std::vector<Edge>* edges);
   double edgeChi2(const Edge& e) const;
+  static SE3 nodePose(const Node& n) {
+    return SE3(Quat(n.q[3], n.q[0], n.q[1], n.q[2]), Vec3(n.t[0], n.t[1], n.t[2]));
+  }
 
   PoseGraphParams params_;
   std::map<KeyframeKey, Node> nodes_;
