@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hermes/core/evaluation.h"
+#include "hermes/server/pose_graph_io.h"
 #include "hermes/server/server_outputs.h"
 
 namespace hermes::system {
@@ -109,6 +110,30 @@ void writeGraphEdges(const OfflineRun& run, std::ostream& o) {
           if (const auto c = checkLoop(run, l)) o << c->err_m;
           break;
         }
+    o << '\n';
+  }
+}
+
+/// The pose graph's nodes in the order of pose_graph.g2o's vertices, each with
+/// its agent, dataset stamp and ground-truth camera pose (empty without one),
+/// so that the graph can be solved again offline and judged (bench pose_graph).
+void writeGraphNodes(const OfflineRun& run, const server::PoseGraph& graph, std::ostream& o) {
+  o.precision(17);
+  o << "vertex,agent,robot,session,keyframe,stamp,gt_x,gt_y,gt_z,gt_qx,gt_qy,gt_qz,gt_qw\n";
+  int vertex = 0;
+  for (const auto& [key, T] : graph.poses()) {
+    const OfflineAgent* a = agentOfRobot(run, key.agent);
+    const server::StoredKeyframe* kf = run.server().map().keyframe(key);
+    o << vertex++ << ',' << (a ? a->name : "?") << ',' << key.agent << ',' << key.session << ','
+      << key.id << ',' << (kf ? kf->keyframe.stamp : 0.0);
+    SE3 T_W_C;
+    if (a && kf && gtCameraPose(*a, kf->keyframe.stamp, &T_W_C)) {
+      const Quat q = T_W_C.quat();
+      o << ',' << T_W_C.translation().x() << ',' << T_W_C.translation().y() << ','
+        << T_W_C.translation().z() << ',' << q.x() << ',' << q.y() << ',' << q.z() << ',' << q.w();
+    } else {
+      o << ",,,,,,,";
+    }
     o << '\n';
   }
 }
@@ -297,6 +322,13 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                            [&](std::ostream& o) { writeGraphEdges(run, o); });
       !s)
     return s;
+  if (Expected<server::PoseGraph> graph = run.server().mapManager().buildPoseGraph()) {
+    if (Status s = server::writePoseGraphG2o(*graph, (out / "pose_graph.g2o").string()); !s) return s;
+    if (Status s = writeFile(out / "pose_graph_nodes.csv",
+                             [&](std::ostream& o) { writeGraphNodes(run, *graph, o); });
+        !s)
+      return s;
+  }  // else nothing anchored: no graph to write
   if (Status s = run.server().map().save((out / "global_map.hgm").string()); !s) return s;
   return server::writePly((out / "global_map.ply").string(),
                           run.server().map().landmarkPositionsWorld(), /*binary=*/true);

@@ -42,6 +42,8 @@ const char* kUsage =
     "  OUT/trajectories/<agent>_gt.tum      the dataset's ground truth (body, TUM)\n"
     "  OUT/bandwidth.csv, uplink_estimate.csv, ate_over_time.csv, loops.csv, pose_graph_edges.csv,\n"
     "  global_map.ply, global_map.hgm (binary map: server::GlobalMap::load)\n"
+    "  OUT/pose_graph.g2o, pose_graph_nodes.csv  the last pose graph (g2o text; solve it again\n"
+    "                                       with: ./hermes bench pose_graph OUT)\n"
     "  OUT/plots/*.png                      top view, bandwidth, error over time (merged vs\n"
     "                                       odometry), pose-graph residuals of the last solve\n"
     "<agent> is the dataset folder's name. --config: YAML (default: built-in defaults,\n"

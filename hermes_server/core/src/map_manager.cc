@@ -1,5 +1,7 @@
 #include "hermes/server/map_manager.h"
 
+#include "hermes/server/pose_graph_io.h"
+
 #include <algorithm>
 #include <chrono>
 
@@ -315,7 +317,7 @@ bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibili
   return changed;
 }
 
-Status MapManager::optimize() {
+Expected<PoseGraph> MapManager::buildPoseGraph() const {
   PoseGraph graph(params_.pose_graph);
   bool fixed = false;
   for (const auto& [tid, t] : map_.trajectories) {
@@ -324,9 +326,9 @@ Status MapManager::optimize() {
     KeyframeId prev_id = kInvalidId;
     for (const auto& [id, kf] : t.keyframes) {
       const KeyframeKey key = keyOf(t, id);
-      if (Status s = graph.addNode(key, kf.T_W_C); !s) return s;
+      if (Status s = graph.addNode(key, kf.T_W_C); !s) return Error{s.error()};
       if (!fixed && world_traj_ && tid == *world_traj_) {
-        if (Status s = graph.setFixed(key); !s) return s;
+        if (Status s = graph.setFixed(key); !s) return Error{s.error()};
         fixed = true;
       }
       if (prev) {
@@ -335,17 +337,32 @@ Status MapManager::optimize() {
                                             : prev->keyframe.T_A_C.inverse() * kf.keyframe.T_A_C;
         const Mat6 info = e != t.odometry.end() ? e->second.information
                                                 : bridgeInformation(prev->keyframe, kf.keyframe);
-        if (Status s = graph.addOdometryEdge(keyOf(t, prev_id), key, T, info); !s) return s;
+        if (Status s = graph.addOdometryEdge(keyOf(t, prev_id), key, T, info); !s) return Error{s.error()};
       }
       prev = &kf;
       prev_id = id;
     }
   }
-  if (!fixed) return Status::Ok();
+  if (!fixed) return Error{"no anchored world trajectory yet"};
   for (const LoopEdge& e : map_.loops) {
     if (!e.accepted || !graph.hasNode(e.a) || !graph.hasNode(e.b)) continue;
-    if (Status s = graph.addLoopEdge(e.a, e.b, e.T_a_b, e.information); !s) return s;
+    if (Status s = graph.addLoopEdge(e.a, e.b, e.T_a_b, e.information); !s) return Error{s.error()};
   }
+  return graph;
+}
+
+Status MapManager::writePoseGraph(const std::string& path) const {
+  Expected<PoseGraph> graph = buildPoseGraph();
+  if (!graph) return Error{"pose graph for " + path + ": " + graph.error()};
+  return writePoseGraphG2o(*graph, path);
+}
+
+Status MapManager::optimize() {
+  const auto world = world_traj_ ? map_.trajectories.find(*world_traj_) : map_.trajectories.end();
+  if (world == map_.trajectories.end() || world->second.keyframes.empty()) return Status::Ok();  // nothing anchored yet
+  Expected<PoseGraph> built = buildPoseGraph();
+  if (!built) return Error{"pose graph: " + built.error()};
+  PoseGraph& graph = *built;
   auto t0 = Clock::now();
   auto r = graph.optimize();
   timings_.add("pose_graph", msSince(t0));

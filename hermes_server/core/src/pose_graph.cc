@@ -356,6 +356,23 @@ std::vector<EdgeResidual> PoseGraph::residuals() const {
   return out;
 }
 
+std::vector<PoseGraph::EdgeMeasurement> PoseGraph::measurements() const {
+  std::vector<EdgeMeasurement> out;
+  auto add = [&](const Edge& e, bool loop) {
+    out.push_back({e.a, e.b, e.T_a_b, e.sqrt_information.transpose() * e.sqrt_information, loop});
+  };
+  for (const Edge& e : odometry_) add(e, false);
+  for (const Edge& e : loops_) add(e, true);
+  return out;
+}
+
+std::vector<KeyframeKey> PoseGraph::fixedNodes() const {
+  std::vector<KeyframeKey> out;
+  for (const auto& [key, n] : nodes_)
+    if (n.fixed) out.push_back(key);
+  return out;
+}
+
 Expected<SE3> PoseGraph::pose(const KeyframeKey& key) const {
   auto it = nodes_.find(key);
   if (it == nodes_.end()) return Error{"pose graph: unknown node " + toString(key)};

@@ -8,6 +8,9 @@
 //   OUT/uplink_estimate.csv               time_s,agent,estimate_kBps (the agents' monitors)
 //   OUT/ate_over_time.csv                 time_s,agent,error_m (merged, common alignment)
 //   OUT/loops.csv                         accepted loops with their error against ground truth
+//   OUT/pose_graph_edges.csv              the last pose-graph solve, edge by edge
+//   OUT/pose_graph.g2o, pose_graph_nodes.csv   that graph (g2o text) and its nodes'
+//                                         agents, stamps and ground truth (bench pose_graph)
 //   OUT/global_map.ply                    landmarks of the merged map (world frame)
 #pragma once
 

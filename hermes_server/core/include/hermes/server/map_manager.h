@@ -81,6 +81,10 @@ class MapManager {
 
   /// Optimises the pose graph of the anchored trajectories now.
   Status optimize();
+  /// The pose graph optimize() would solve, at the current poses.
+  Expected<PoseGraph> buildPoseGraph() const;
+  /// Writes that graph as g2o text (pose_graph_io.h).
+  Status writePoseGraph(const std::string& path) const;
 
   const GlobalMap& map() const { return map_; }
   const TimingStats& timings() const { return timings_; }

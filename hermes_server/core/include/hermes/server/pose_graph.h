@@ -156,6 +156,16 @@ class PoseGraph {
   std::size_t numLoopEdges() const { return loops_.size(); }
   /// Every edge's residual at the current poses (odometry first, then loops).
   std::vector<EdgeResidual> residuals() const;
+  /// Every edge as given (odometry first, then loops), for writing the graph out.
+  struct EdgeMeasurement {
+    KeyframeKey a, b;
+    SE3 T_a_b;
+    Mat6 information;
+    bool loop = false;
+  };
+  std::vector<EdgeMeasurement> measurements() const;
+  /// Nodes held constant.
+  std::vector<KeyframeKey> fixedNodes() const;
 
  private:
   struct Node {
