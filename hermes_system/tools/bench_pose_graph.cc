@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -41,7 +42,9 @@ const char* kUsage =
     "  --init    odometry: re-chain each trajectory from its first node (default);\n"
     "            file: start from the run's final poses\n"
     "  --set     override a pose-graph parameter, e.g.\n"
-    "            --set server.pose_graph.odometry_reweight_rounds=0\n";
+    "            --set server.pose_graph.odometry_reweight_rounds=0\n"
+    "  --loop-information-scale X, --odometry-information-scale X\n"
+    "            multiply every loop (odometry) edge's information by X (what-if)\n";
 
 struct NodeInfo {
   std::string agent;
@@ -98,8 +101,11 @@ void chainOdometry(server::PoseGraphFile* f) {
 
 struct Judged {
   std::map<std::string, double> per_agent;
+  std::map<std::string, double> rpe_per_agent;  ///< local shape: RPE over kRpeDeltaS
   double all = 0;
 };
+
+constexpr double kRpeDeltaS = 10.0;
 
 /// ATE of the poses against ground truth under one rigid alignment over all.
 Expected<Judged> judge(const std::vector<std::pair<KeyframeKey, SE3>>& nodes,
@@ -119,7 +125,13 @@ Expected<Judged> judge(const std::vector<std::pair<KeyframeKey, SE3>>& nodes,
   if (!common) return Error{common.error()};
   Judged j;
   j.all = common->trans_m.rmse;
-  for (const auto& [name, a] : per) j.per_agent[name] = eval::ateWithAlignment(a, common->alignment).trans_m.rmse;
+  eval::EvalParams rpe;
+  rpe.rpe_delta_s = kRpeDeltaS;
+  rpe.rpe_tolerance = 0.5;
+  for (const auto& [name, a] : per) {
+    j.per_agent[name] = eval::ateWithAlignment(a, common->alignment).trans_m.rmse;
+    j.rpe_per_agent[name] = eval::computeRpe(a, eval::Alignment{}, rpe).trans_m.rmse;
+  }
   return j;
 }
 
@@ -127,6 +139,7 @@ nlohmann::json toJson(const Judged& j) {
   nlohmann::json o;
   o["ate_rmse_m"] = j.all;
   for (const auto& [name, v] : j.per_agent) o["per_agent"][name] = v;
+  for (const auto& [name, v] : j.rpe_per_agent) o["rpe_10s_per_agent"][name] = v;
   return o;
 }
 
@@ -134,6 +147,7 @@ nlohmann::json toJson(const Judged& j) {
 
 int main(int argc, char** argv) {
   std::string run_dir, init = "odometry", json_out;
+  double loop_scale = 1, odometry_scale = 1;
   std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -153,6 +167,16 @@ int main(int argc, char** argv) {
       std::string v;
       value(&v);
       sets.push_back(v);
+    } else if (a == "--loop-information-scale" || a == "--odometry-information-scale") {
+      std::string v;
+      value(&v);
+      char* end = nullptr;
+      const double x = std::strtod(v.c_str(), &end);
+      if (end == v.c_str() || *end != '\0' || !(x > 0) || !std::isfinite(x)) {
+        std::fprintf(stderr, "hermes_bench_pose_graph: %s needs a positive number\n", a.c_str());
+        return 2;
+      }
+      (a[2] == 'l' ? loop_scale : odometry_scale) = x;
     } else if (a == "--json") {
       value(&json_out);
     } else if (!a.empty() && a[0] != '-' && run_dir.empty()) {
@@ -184,6 +208,7 @@ int main(int argc, char** argv) {
                     std::to_string(file->nodes.size()) + " nodes",
                 2);
 
+  for (auto& e : file->edges) e.information *= e.loop ? loop_scale : odometry_scale;
   Expected<Judged> as_run = judge(file->nodes, *info);
   if (!as_run) return fail(as_run.error(), 1);
   server::PoseGraphFile chained = *file;
@@ -197,7 +222,10 @@ int main(int argc, char** argv) {
     std::vector<NodeInfo> i;
     for (std::size_t k = 0; k < chained.nodes.size(); ++k)
       if ((*info)[k].agent == name) n.push_back(chained.nodes[k]), i.push_back((*info)[k]);
-    if (Expected<Judged> j = judge(n, i)) odometry_own.per_agent[name] = j->all;
+    if (Expected<Judged> j = judge(n, i)) {
+      odometry_own.per_agent[name] = j->all;
+      odometry_own.rpe_per_agent[name] = j->rpe_per_agent.at(name);
+    }
   }
 
   Expected<server::PoseGraph> graph = (init == "file" ? *file : chained).build(params);
@@ -215,6 +243,8 @@ int main(int argc, char** argv) {
   j["run"] = run_dir;
   j["init"] = init;
   j["overrides"] = sets;
+  j["loop_information_scale"] = loop_scale;
+  j["odometry_information_scale"] = odometry_scale;
   j["nodes"] = graph->numNodes();
   j["odometry_edges"] = graph->numOdometryEdges();
   j["loop_edges"] = graph->numLoopEdges();
@@ -223,10 +253,14 @@ int main(int argc, char** argv) {
   j["solved"] = toJson(*now);
   j["as_run"] = toJson(*as_run);
   j["odometry_own_alignment"] = toJson(odometry_own);
-  std::fprintf(stderr, "%-18s %10s %10s %10s\n", "agent [cm]", "solved", "as run", "odometry");
+  std::fprintf(stderr, "%-18s %30s   %s\n", "", "ATE [cm]", "RPE over 10 s [cm]");
+  std::fprintf(stderr, "%-18s %10s %10s %10s %10s %10s %10s\n", "agent", "solved", "as run", "odometry",
+               "solved", "as run", "odometry");
   for (const auto& [name, v] : now->per_agent)
-    std::fprintf(stderr, "%-18s %10.2f %10.2f %10.2f\n", name.c_str(), 100 * v,
-                 100 * as_run->per_agent.at(name), 100 * odometry_own.per_agent[name]);
+    std::fprintf(stderr, "%-18s %10.2f %10.2f %10.2f %10.2f %10.2f %10.2f\n", name.c_str(), 100 * v,
+                 100 * as_run->per_agent.at(name), 100 * odometry_own.per_agent[name],
+                 100 * now->rpe_per_agent.at(name), 100 * as_run->rpe_per_agent.at(name),
+                 100 * odometry_own.rpe_per_agent[name]);
   std::fprintf(stderr, "%-18s %10.2f %10.2f\n", "all (one alignment)", 100 * now->all, 100 * as_run->all);
   std::fprintf(stderr, "solve %.0f ms, %d iterations, %s, %d re-weighting rounds\n", r->time_ms,
                r->iterations, r->termination.c_str(), r->reweight_rounds);
