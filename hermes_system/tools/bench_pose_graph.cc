@@ -44,7 +44,10 @@ const char* kUsage =
     "  --set     override a pose-graph parameter, e.g.\n"
     "            --set server.pose_graph.odometry_reweight_rounds=0\n"
     "  --loop-information-scale X, --odometry-information-scale X\n"
-    "            multiply every loop (odometry) edge's information by X (what-if)\n";
+    "            multiply every loop (odometry) edge's information by X (what-if)\n"
+    "  --ground-truth-loops\n"
+    "            replace every loop's measurement by the ground-truth relative pose\n"
+    "            (what-if: how much do the loops' own errors cost?)\n";
 
 struct NodeInfo {
   std::string agent;
@@ -148,6 +151,7 @@ nlohmann::json toJson(const Judged& j) {
 int main(int argc, char** argv) {
   std::string run_dir, init = "odometry", json_out;
   double loop_scale = 1, odometry_scale = 1;
+  bool gt_loops = false;
   std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -177,6 +181,8 @@ int main(int argc, char** argv) {
         return 2;
       }
       (a[2] == 'l' ? loop_scale : odometry_scale) = x;
+    } else if (a == "--ground-truth-loops") {
+      gt_loops = true;
     } else if (a == "--json") {
       value(&json_out);
     } else if (!a.empty() && a[0] != '-' && run_dir.empty()) {
@@ -208,7 +214,13 @@ int main(int argc, char** argv) {
                     std::to_string(file->nodes.size()) + " nodes",
                 2);
 
-  for (auto& e : file->edges) e.information *= e.loop ? loop_scale : odometry_scale;
+  std::map<KeyframeKey, std::size_t> index;
+  for (std::size_t i = 0; i < file->nodes.size(); ++i) index[file->nodes[i].first] = i;
+  for (auto& e : file->edges) {
+    e.information *= e.loop ? loop_scale : odometry_scale;
+    const NodeInfo &a = (*info)[index.at(e.a)], &b = (*info)[index.at(e.b)];
+    if (gt_loops && e.loop && a.has_gt && b.has_gt) e.T_a_b = a.T_W_C_gt.inverse() * b.T_W_C_gt;
+  }
   Expected<Judged> as_run = judge(file->nodes, *info);
   if (!as_run) return fail(as_run.error(), 1);
   server::PoseGraphFile chained = *file;
@@ -245,6 +257,7 @@ int main(int argc, char** argv) {
   j["overrides"] = sets;
   j["loop_information_scale"] = loop_scale;
   j["odometry_information_scale"] = odometry_scale;
+  j["ground_truth_loops"] = gt_loops;
   j["nodes"] = graph->numNodes();
   j["odometry_edges"] = graph->numOdometryEdges();
   j["loop_edges"] = graph->numLoopEdges();
