@@ -124,6 +124,10 @@ Expected<PinholeRadtan> readEurocCameraYaml(const std::string& path) {
 
 Status writeEurocCameraYaml(const std::string& path, const PinholeRadtan& cam,
                             const std::string& comment) {
+  if (cam.model != DistortionModel::kRadtan || cam.distortionCount() != 4)
+    return Error{path + ": a EuRoC sensor.yaml holds radial-tangential k1 k2 p1 p2 only " +
+                 "(camera has " + std::string(toString(cam.model)) + " with " +
+                 std::to_string(cam.distortionCount()) + " coefficients)"};
   std::ostringstream o;
   o.precision(17);
   o << "%YAML:1.0\n# General sensor definitions.\nsensor_type: camera\ncomment: " << comment

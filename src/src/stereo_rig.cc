@@ -13,8 +13,12 @@ cv::Mat cameraMatrix(const PinholeIntrinsics& K) {
   return (cv::Mat_<double>(3, 3) << K.fx, 0, K.cx, 0, K.fy, K.cy, 0, 0, 1);
 }
 
+// 4, 5 or 8 coefficients in OpenCV's order (cv::fisheye takes exactly 4).
 cv::Mat distCoeffs(const PinholeRadtan& c) {
-  return (cv::Mat_<double>(1, 4) << c.dist[0], c.dist[1], c.dist[2], c.dist[3]);
+  const int n = c.distortionCount();
+  cv::Mat d(1, n, CV_64F);
+  for (int i = 0; i < n; ++i) d.at<double>(0, i) = c.dist[i];
+  return d;
 }
 
 Mat3 toEigen3(const cv::Mat& m) {
@@ -43,6 +47,10 @@ Expected<RectifiedStereo> rectify(const StereoRig& rig, const RectifyOptions& op
                  std::to_string(Kr.width) + "x" + std::to_string(Kr.height) + ")"};
   if (!(opt.alpha >= 0.0 && opt.alpha <= 1.0))
     return Error{"rectify: alpha must lie in [0, 1]"};
+  const bool fisheye = rig.left.model == DistortionModel::kEquidistant;
+  if (rig.left.model != rig.right.model)
+    return Error{std::string("stereo rig: left and right distortion models differ (") +
+                 toString(rig.left.model) + " vs " + toString(rig.right.model) + ")"};
 
   // OpenCV wants R, T with x_right = R x_left + T, i.e. T_Cr_Cl.
   const SE3 T_Cr_Cl = rig.T_Cl_Cr().inverse();
@@ -58,9 +66,14 @@ Expected<RectifiedStereo> rectify(const StereoRig& rig, const RectifyOptions& op
   }
   const cv::Size size(Kl.width, Kl.height);
   cv::Mat R1, R2, P1, P2, Q;
-  cv::stereoRectify(cameraMatrix(Kl), distCoeffs(rig.left), cameraMatrix(Kr),
-                    distCoeffs(rig.right), size, R, T, R1, R2, P1, P2, Q,
-                    cv::CALIB_ZERO_DISPARITY, opt.alpha, size);
+  if (fisheye)  // alpha becomes cv::fisheye's "balance" (0: valid pixels, 1: all pixels)
+    cv::fisheye::stereoRectify(cameraMatrix(Kl), distCoeffs(rig.left), cameraMatrix(Kr),
+                               distCoeffs(rig.right), size, R, T, R1, R2, P1, P2, Q,
+                               cv::CALIB_ZERO_DISPARITY, size, opt.alpha);
+  else
+    cv::stereoRectify(cameraMatrix(Kl), distCoeffs(rig.left), cameraMatrix(Kr),
+                      distCoeffs(rig.right), size, R, T, R1, R2, P1, P2, Q,
+                      cv::CALIB_ZERO_DISPARITY, opt.alpha, size);
 
   RectifiedStereo out;
   out.rig = rig;
@@ -74,16 +87,29 @@ Expected<RectifiedStereo> rectify(const StereoRig& rig, const RectifyOptions& op
   out.baseline = -P2.at<double>(0, 3) / P2.at<double>(0, 0);
   if (!(out.baseline > 0) || !std::isfinite(out.baseline) || !(out.K.fx > 0))
     return Error{"stereo rig: rectification failed (left camera must be on the left)"};
+  // cv::fisheye estimates the new camera from the image border; lenses seeing
+  // 90 deg or more off axis there give a meaningless principal point.
+  if (fisheye && !(out.K.cx >= 0 && out.K.cx <= size.width && out.K.cy >= 0 &&
+                   out.K.cy <= size.height))
+    return Error{"stereo rig: fisheye rectification failed (principal point outside the "
+                 "image: field of view too wide for one pinhole image)"};
   out.R_rect_left = toEigen3(R1);
   out.R_rect_right = toEigen3(R2);
   // p_rect = R1 p_Cl  =>  T_Cl_Crect has rotation R1^T and no translation.
   out.T_B_Crect = rig.left.T_B_C * SE3(Mat3(out.R_rect_left.transpose()), Vec3::Zero());
 
   const int type = opt.fixed_point_maps ? CV_16SC2 : CV_32FC1;
-  cv::initUndistortRectifyMap(cameraMatrix(Kl), distCoeffs(rig.left), R1, P1, size, type,
-                              out.map_left_x, out.map_left_y);
-  cv::initUndistortRectifyMap(cameraMatrix(Kr), distCoeffs(rig.right), R2, P2, size, type,
-                              out.map_right_x, out.map_right_y);
+  auto map = [&](const PinholeRadtan& cam, const cv::Mat& Rr, const cv::Mat& P, cv::Mat* mx,
+                 cv::Mat* my) {
+    if (fisheye)
+      cv::fisheye::initUndistortRectifyMap(cameraMatrix(cam.K), distCoeffs(cam), Rr, P, size,
+                                           type, *mx, *my);
+    else
+      cv::initUndistortRectifyMap(cameraMatrix(cam.K), distCoeffs(cam), Rr, P, size, type, *mx,
+                                  *my);
+  };
+  map(rig.left, R1, P1, &out.map_left_x, &out.map_left_y);
+  map(rig.right, R2, P2, &out.map_right_x, &out.map_right_y);
   return out;
 }
 

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "dataset_text.h"
+#include "hermes/core/camera_calibration.h"
 
 namespace fs = std::filesystem;
 using namespace hermes::dataset_text;  // NOLINT: private helpers
@@ -60,6 +61,13 @@ Expected<RgbdCamera> readTumCameraYaml(const std::string& path) {
     return Error{path + ":" + std::to_string(e.mark.line + 1) + ": YAML error: " + e.msg};
   }
   if (!root.IsMap()) return Error{path + ": not a YAML map"};
+  if (root["kind"]) {  // a Hermes camera file (config/cameras/*.yaml) copied in
+    auto calib = readHermesCameraFile(path);
+    if (!calib) return Error{calib.error()};
+    if (calib->kind != CameraCalibration::Kind::kRgbd)
+      return Error{path + ": key 'kind' must be rgbd for a TUM / ICL-NUIM folder"};
+    return calib->rgbd;
+  }
   RgbdCamera cam;
   if (root["camera_model"]) {
     const std::string model = root["camera_model"].Scalar();
@@ -80,6 +88,12 @@ Expected<RgbdCamera> readTumCameraYaml(const std::string& path) {
   Status s = requireDouble(root, "depth_scale", path, &cam.depth_scale, false);
   if (!s) return Error{s.error()};
   if (!(cam.depth_scale > 0)) return Error{path + ": depth_scale must be positive"};
+  // Optional plumb_bob distortion of the colour camera (absent = undistorted).
+  const char* kDist[5] = {"k1", "k2", "p1", "p2", "k3"};
+  for (int i = 0; i < 5; ++i) {
+    s = requireDouble(root, kDist[i], path, &cam.dist[i], false);
+    if (!s) return Error{s.error()};
+  }
   s = requireDouble(root, "rate_hz", path, &cam.rate_hz, false);
   if (!s) return Error{s.error()};
   if (!(cam.rate_hz > 0)) return Error{path + ": rate_hz must be positive"};
@@ -104,9 +118,15 @@ Expected<RgbdCamera> readTumCameraYaml(const std::string& path) {
 Status writeTumCameraYaml(const std::string& path, const RgbdCamera& cam) {
   std::ostringstream o;
   o.precision(17);
-  o << "# Hermes RGB-D camera (pinhole, no distortion)\ncamera_model: pinhole\n"
+  o << "# Hermes RGB-D camera (pinhole, "
+    << (cam.hasDistortion() ? "plumb_bob distortion" : "no distortion")
+    << ")\ncamera_model: pinhole\n"
     << "fx: " << cam.K.fx << "  # [px]\nfy: " << cam.K.fy << "\ncx: " << cam.K.cx
-    << "\ncy: " << cam.K.cy << "\nwidth: " << cam.K.width << "  # [px]\nheight: "
+    << "\ncy: " << cam.K.cy << "\n";
+  if (cam.hasDistortion())
+    o << "k1: " << cam.dist[0] << "  # colour lens, plumb_bob\nk2: " << cam.dist[1]
+      << "\np1: " << cam.dist[2] << "\np2: " << cam.dist[3] << "\nk3: " << cam.dist[4] << "\n";
+  o << "width: " << cam.K.width << "  # [px]\nheight: "
     << cam.K.height << "\ndepth_scale: " << cam.depth_scale
     << "  # depth PNG value per metre\nrate_hz: " << cam.rate_hz
     << "  # [Hz]\nT_B_C: [";  // body <- camera, row-major

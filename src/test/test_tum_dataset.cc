@@ -210,3 +210,48 @@ TEST(TumDataset, CameraYamlRoundTrip) {
   EXPECT_DOUBLE_EQ(back->rate_hz, 15.0);
   EXPECT_LT((back->T_B_C.matrix() - cam.T_B_C.matrix()).norm(), 1e-14);
 }
+
+TEST(TumDataset, CameraYamlCarriesColourDistortion) {
+  // Old files (no k1..k3) read as undistorted.
+  const std::string dir = writeTinyTum("distortion");
+  auto plain = TumDataset::open(dir);
+  ASSERT_TRUE(plain.ok()) << plain.error();
+  EXPECT_FALSE(plain->camera().hasDistortion());
+
+  // k1 k2 p1 p2 k3 (plumb_bob) are read, exposed and written back.
+  std::ofstream(fs::path(dir) / "camera.yaml", std::ios::app)
+      << "k1: 0.262383\nk2: -0.953104\np1: -0.005358\np2: 0.002628\nk3: 1.163314\n";
+  auto ds = TumDataset::open(dir);
+  ASSERT_TRUE(ds.ok()) << ds.error();
+  const std::array<double, 5> fr1{0.262383, -0.953104, -0.005358, 0.002628, 1.163314};
+  EXPECT_EQ(ds->camera().dist, fr1);
+  EXPECT_EQ(ds->camera().colourCamera().distortionCount(), 5);
+  const std::string path = ::testing::TempDir() + "/rt_camera_dist.yaml";
+  ASSERT_TRUE(writeTumCameraYaml(path, ds->camera()));
+  auto back = readTumCameraYaml(path);
+  ASSERT_TRUE(back.ok()) << back.error();
+  EXPECT_EQ(back->dist, fr1);
+  {
+    std::ifstream in(fs::path(dir) / "camera.yaml");
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    text.replace(text.find("k3: 1.163314"), 12, "k3: abc");
+    std::ofstream(fs::path(dir) / "camera.yaml") << text;
+  }
+  auto bad = TumDataset::open(dir);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_TRUE(contains(bad.error(), "'k3'")) << bad.error();
+
+  // A Hermes camera file copied in as camera.yaml (config/cameras/tum_fr1.yaml).
+  fs::copy_file(std::string(HERMES_SOURCE_DIR) + "/config/cameras/tum_fr1.yaml",
+                fs::path(dir) / "camera.yaml", fs::copy_options::overwrite_existing);
+  auto hermes = TumDataset::open(dir);
+  ASSERT_TRUE(hermes.ok()) << hermes.error();
+  EXPECT_EQ(hermes->camera().K.fx, 517.306408);
+  EXPECT_EQ(hermes->camera().dist, fr1);
+  EXPECT_EQ(hermes->camera().depth_scale, 5000.0);
+  fs::copy_file(std::string(HERMES_SOURCE_DIR) + "/config/cameras/euroc.yaml",
+                fs::path(dir) / "camera.yaml", fs::copy_options::overwrite_existing);
+  auto stereo = TumDataset::open(dir);
+  ASSERT_FALSE(stereo.ok());
+  EXPECT_TRUE(contains(stereo.error(), "'kind'")) << stereo.error();
+}

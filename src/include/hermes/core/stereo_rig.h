@@ -1,6 +1,7 @@
-// Calibrated stereo rig (two pinhole + radial-tangential cameras) and its
-// rectification: a shared pinhole K, horizontal epipolar lines, zero disparity
-// at infinity. Frames: Cl/Cr original cameras, Crect the rectified left camera.
+// Calibrated stereo rig (two pinhole cameras with radtan or equidistant lens
+// distortion, both the same model) and its rectification: a shared pinhole K,
+// horizontal epipolar lines, zero disparity at infinity. Frames: Cl/Cr
+// original cameras, Crect the rectified left camera.
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -55,8 +56,10 @@ class RectifiedStereo {
 };
 
 /// Builds the rectification with cv::stereoRectify (CALIB_ZERO_DISPARITY) and
-/// cv::initUndistortRectifyMap. Errors when the rig is degenerate (different
-/// resolutions, zero baseline, non-horizontal arrangement).
+/// cv::initUndistortRectifyMap; for equidistant cameras with cv::fisheye's
+/// versions (opt.alpha is then fisheye's "balance"). Errors when the rig is
+/// degenerate (different resolutions or distortion models, zero baseline,
+/// non-horizontal arrangement).
 Expected<RectifiedStereo> rectify(const StereoRig& rig, const RectifyOptions& opt = {});
 
 }  // namespace hermes

@@ -2,16 +2,23 @@
 // '#' comments), optional groundtruth.txt (TUM trajectory), optional camera.yaml.
 //
 // camera.yaml (Hermes' small format, written by our renderer):
-//   camera_model: pinhole   # optional; only pinhole (no distortion)
+//   camera_model: pinhole   # optional; only pinhole
 //   fx: 481.2               # [px]
 //   fy: 480.0
 //   cx: 319.5
 //   cy: 239.5
+//   k1: 0.262383            # optional colour lens distortion, plumb_bob order
+//   k2: -0.953104           #   k1 k2 p1 p2 k3 (absent = 0 = undistorted images)
+//   p1: -0.005358
+//   p2: 0.002628
+//   k3: 1.163314
 //   width: 640              # [px]
 //   height: 480
 //   depth_scale: 5000       # depth PNG value per metre
 //   rate_hz: 30             # optional
 //   T_B_C: [16 numbers]     # optional, row-major 4x4 body <- camera (default identity)
+// A Hermes RGB-D camera file (key `kind: rgbd`, config/cameras/tum_fr1.yaml
+// etc.) is accepted as camera.yaml too.
 #pragma once
 
 #include <string>
@@ -24,7 +31,8 @@
 
 namespace hermes {
 
-/// Reads camera.yaml (format above); errors name the file and key.
+/// Reads camera.yaml (format above, distortion into RgbdCamera::dist); errors
+/// name the file and key.
 Expected<RgbdCamera> readTumCameraYaml(const std::string& path);
 /// Writes camera.yaml (format above) with full precision.
 Status writeTumCameraYaml(const std::string& path, const RgbdCamera& cam);
@@ -63,6 +71,8 @@ class TumDataset {
   static Expected<TumDataset> open(const std::string& dir, const TumOptions& opt = {});
 
   const std::string& root() const { return root_; }
+  /// The camera, with the colour lens distortion (RgbdCamera::dist) that
+  /// keypoints of load()ed images still carry.
   const RgbdCamera& camera() const { return camera_; }
   /// True when camera.yaml was absent and ICL-NUIM defaults are used.
   bool defaultCamera() const { return default_camera_; }
