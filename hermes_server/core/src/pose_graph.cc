@@ -16,6 +16,8 @@ Status PoseGraphParams::read(const Config& config, const std::string& prefix) {
                    config.getChoice(p + "odometry_loss", {"none", "huber", "cauchy"}, &odometry_loss),
                    config.get(p + "odometry_loss_scale", &odometry_loss_scale),
                    config.get(p + "odometry_reweight_rounds", &odometry_reweight_rounds),
+                   config.getChoice(p + "odometry_reweight_scope", {"trajectory", "local"},
+                                    &odometry_reweight_scope),
                    config.get(p + "odometry_reweight_window", &odometry_reweight_window),
                    config.get(p + "odometry_reweight_max", &odometry_reweight_max),
                    config.get(p + "odometry_reweight_floor", &odometry_reweight_floor),
@@ -37,6 +39,7 @@ void PoseGraphParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(p + "odometry_loss", odometry_loss);
   w->set(p + "odometry_loss_scale", odometry_loss_scale);
   w->set(p + "odometry_reweight_rounds", odometry_reweight_rounds);
+  w->set(p + "odometry_reweight_scope", odometry_reweight_scope);
   w->set(p + "odometry_reweight_window", odometry_reweight_window);
   w->set(p + "odometry_reweight_max", odometry_reweight_max);
   w->set(p + "odometry_reweight_floor", odometry_reweight_floor);
@@ -57,6 +60,8 @@ Status PoseGraphParams::validate() const {
   }
   if (!(odometry_loss_scale > 0)) return Error{"odometry_loss_scale must be > 0"};
   if (odometry_reweight_rounds < 0) return Error{"odometry_reweight_rounds must be >= 0"};
+  if (odometry_reweight_scope != "trajectory" && odometry_reweight_scope != "local")
+    return Error{"odometry_reweight_scope must be trajectory or local (got '" + odometry_reweight_scope + "')"};
   if (odometry_reweight_window < 0) return Error{"odometry_reweight_window must be >= 0"};
   if (!(odometry_reweight_max >= 1)) return Error{"odometry_reweight_max must be >= 1"};
   if (!(odometry_reweight_floor > 0)) return Error{"odometry_reweight_floor must be > 0"};
@@ -192,12 +197,13 @@ Expected<PoseGraphResult> PoseGraph::optimize() {
 bool PoseGraph::reweightOdometry() {
   // Squared whitened error of every odometry edge under its own information,
   // grouped by trajectory in key order; per edge, the mean chi2 per degree of
-  // freedom of the edges within +-window of it on its trajectory.
+  // freedom of its whole trajectory's edges or of those within +-window of it.
   std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::pair<KeyframeKey, std::size_t>>> traj;
   for (std::size_t i = 0; i < odometry_.size(); ++i)
     traj[{odometry_[i].a.agent, odometry_[i].a.session}].emplace_back(odometry_[i].a, i);
   std::vector<double> chi2(odometry_.size()), local(odometry_.size(), 0.0);
   for (std::size_t i = 0; i < odometry_.size(); ++i) chi2[i] = edgeChi2(odometry_[i]);
+  const bool whole = params_.odometry_reweight_scope == "trajectory";
   const int w = params_.odometry_reweight_window;
   for (auto& [id, edges] : traj) {
     std::sort(edges.begin(), edges.end());
@@ -205,7 +211,8 @@ bool PoseGraph::reweightOdometry() {
     for (int k = 0; k < n; ++k) {
       double sum = 0;
       int count = 0;
-      for (int j = std::max(0, k - w); j <= std::min(n - 1, k + w); ++j, ++count) sum += chi2[edges[j].second];
+      const int lo = whole ? 0 : std::max(0, k - w), hi = whole ? n - 1 : std::min(n - 1, k + w);
+      for (int j = lo; j <= hi; ++j, ++count) sum += chi2[edges[j].second];
       local[edges[k].second] = sum / (6.0 * count);
     }
   }
