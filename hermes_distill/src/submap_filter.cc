@@ -52,6 +52,16 @@ Submap applyKeyframeTrim(const Submap& w, const std::vector<int>& kept) {
   for (const OdometryEdge& e : w.odometry) edge_from[e.from] = &e;
   std::vector<int> order = kept;
   std::sort(order.begin(), order.end());
+  // A loss of tracking before a dropped keyframe is a loss before the next kept
+  // one (the server then knows not to trust its bridge across the gap).
+  std::unordered_map<KeyframeId, bool> lost;
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    bool any = false;
+    for (int j = k == 0 ? 0 : order[k - 1] + 1; j <= order[k]; ++j)
+      any = any || w.keyframes[static_cast<std::size_t>(j)].lost_before;
+    lost[w.keyframes[static_cast<std::size_t>(order[k])].id] = any;
+  }
+  for (Keyframe& kf : out.keyframes) kf.lost_before = lost.at(kf.id);
   for (std::size_t k = 1; k < order.size(); ++k) {
     std::vector<RelativePoseCov> chain;
     bool complete = true;

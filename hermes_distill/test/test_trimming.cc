@@ -150,6 +150,21 @@ TEST(Trimming, AppliedTrimDropsOrphansAndAddsOdometry) {
     if (first->to != e.to) EXPECT_LT(e.information(0, 0), first->information(0, 0));
     else EXPECT_TRUE(e.information.isApprox(first->information));
   }
+  // A loss before a dropped keyframe moves to the next kept one.
+  Submap lossy = w;
+  std::size_t dropped = 0;
+  while (dropped < w.keyframes.size() &&
+         std::find(r.kept.begin(), r.kept.end(), static_cast<int>(dropped)) != r.kept.end())
+    ++dropped;
+  ASSERT_LT(dropped, w.keyframes.size());
+  lossy.keyframes[dropped].lost_before = true;
+  const Submap lt = applyKeyframeTrim(lossy, r.kept);
+  int flagged = 0;
+  for (const Keyframe& kf : lt.keyframes) {
+    flagged += kf.lost_before;
+    if (kf.lost_before) EXPECT_GT(kf.id, lossy.keyframes[dropped].id);
+  }
+  EXPECT_EQ(flagged, 1);
   // Without the window's edges between two kept keyframes no edge is invented.
   Submap no_edges = w;
   no_edges.odometry.clear();

@@ -128,6 +128,10 @@ void readKeyframe(BodyReader& r, std::size_t i, KeyframeId prev, Keyframe* kf,
   const std::uint64_t camera = r.varint([&] { return what() + " camera id"; });
   if (camera > std::numeric_limits<std::uint32_t>::max()) r.fail(what() + " camera id overflows");
   kf->camera_id = static_cast<std::uint32_t>(camera);
+  std::uint8_t flags = 0;
+  r.array(&flags, 1, [&] { return what() + " flags"; });
+  if (flags & ~kKeyframeFlagLostBefore) r.fail(what() + " has unknown flags " + str(flags));
+  kf->lost_before = (flags & kKeyframeFlagLostBefore) != 0;
   const std::size_t n =
       r.count(kKeypointBytes + kDescriptorBytes, [&] { return what() + " keypoint count"; });
   kf->keypoints.resize(n);

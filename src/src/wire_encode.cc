@@ -150,6 +150,8 @@ void writeBody(const Submap& s, std::vector<std::uint8_t>* out) {
     w.scalar(kf.stamp);
     w.pose(kf.T_A_C);
     w.varint(kf.camera_id);
+    const std::uint8_t flags = kf.lost_before ? kKeyframeFlagLostBefore : 0;
+    w.array(&flags, 1);
     const std::size_t n = kf.keypoints.size();
     w.varint(n);
     column.resize(n);
@@ -204,7 +206,7 @@ WireStats wireStats(const Submap& s) {
   KeyframeId prev_kf = 0;
   for (const Keyframe& kf : s.keyframes) {
     st.keyframes += varintSize(zigzagDelta(kf.id, prev_kf)) + 8 + kPoseBytes +
-                    varintSize(kf.camera_id) + varintSize(kf.keypoints.size());
+                    varintSize(kf.camera_id) + 1 + varintSize(kf.keypoints.size());
     prev_kf = kf.id;
     st.keypoints += kKeypointBytes * kf.keypoints.size();
     st.descriptors += kDescriptorBytes * kf.keypoints.size();

@@ -21,7 +21,8 @@ static_assert(sizeof(Descriptor) == 32, "Descriptor must be 32 packed bytes");
 // Minimum encoded size of one element of each counted container (varints count 1).
 constexpr std::size_t kCameraBytes = 4 * 8 + 2 * 4;
 constexpr std::size_t kPoseBytes = 7 * 8;
-constexpr std::size_t kMinKeyframeBytes = 1 + 8 + kPoseBytes + 1 + 1;
+constexpr std::size_t kMinKeyframeBytes = 1 + 8 + kPoseBytes + 1 + 1 + 1;
+constexpr std::uint8_t kKeyframeFlagLostBefore = 1;
 constexpr std::size_t kKeypointBytes = 4 + 4 + 1 + 4;
 constexpr std::size_t kDescriptorBytes = 32;
 constexpr std::size_t kMinLandmarkBytes = 1 + 3 * 4 + kDescriptorBytes + 1;

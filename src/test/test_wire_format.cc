@@ -52,6 +52,7 @@ void expectSame(const Submap& a, const Submap& b) {
     EXPECT_EQ(x.id, y.id);
     EXPECT_EQ(x.stamp, y.stamp);
     EXPECT_EQ(x.camera_id, y.camera_id);
+    EXPECT_EQ(x.lost_before, y.lost_before);
     EXPECT_LT((x.T_A_C.matrix() - y.T_A_C.matrix()).cwiseAbs().maxCoeff(), 1e-12);
     ASSERT_EQ(x.keypoints.size(), y.keypoints.size());
     for (std::size_t k = 0; k < x.keypoints.size(); ++k) {
@@ -122,7 +123,8 @@ TEST(WireFormat, RoundTripRandomSubmaps) {
     o.cameras = 1 + static_cast<int>(seed % 2);
     o.random_ids = seed % 2 == 0;
     o.seed = seed;
-    const Submap s = makeSyntheticSubmap(o);
+    Submap s = makeSyntheticSubmap(o);
+    if (seed % 3 == 0) s.keyframes.back().lost_before = true;  // a relocalisation
     ASSERT_EQ(s.validate(), "");
     ASSERT_GT(s.observationCount(), 0u);
     for (bool zstd : {false, true}) {

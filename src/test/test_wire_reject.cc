@@ -119,6 +119,7 @@ Bytes bodyWithOneKeyframe(int kps) {
   w.f64(3.5);
   w.identityPose();
   w.vu(0);  // camera 0
+  w.b.push_back(1);  // flags: lost before
   w.vu(kps);
   for (int k = 0; k < kps; ++k) w.f32(10.f + k);  // u
   for (int k = 0; k < kps; ++k) w.f32(20.f);      // v
@@ -154,6 +155,7 @@ TEST(WireReject, HandBuiltFrameFollowsTheDocumentedLayout) {
   ASSERT_EQ(d->keyframes.size(), 1u);
   EXPECT_EQ(d->keyframes[0].id, 10u);
   EXPECT_EQ(d->keyframes[0].stamp, 3.5);
+  EXPECT_TRUE(d->keyframes[0].lost_before);
   EXPECT_EQ(d->keyframes[0].keypoints[1].u, 11.f);
   EXPECT_EQ(d->keyframes[0].keypoint_landmark, (std::vector<LandmarkId>{kInvalidId, 7}));
   EXPECT_EQ(d->landmarks[0].p_A, Vec3(1, 2, 3));
@@ -203,7 +205,11 @@ TEST(WireReject, RejectsBadMagicVersionFlagsAndOversize) {
   f = frame;
   setLE(&f, 4, 7, 2);
   reseal(&f);
-  EXPECT_EQ(decodeError(f), "wire: version 7 not supported (this build reads 1)");
+  EXPECT_EQ(decodeError(f), "wire: version 7 not supported (this build reads 2)");
+  f = frame;
+  setLE(&f, 4, 1, 2);  // v1 had no keyframe flags: refused, not misread
+  reseal(&f);
+  EXPECT_EQ(decodeError(f), "wire: version 1 not supported (this build reads 2)");
   f = frame;
   setLE(&f, 6, 0x8000, 2);
   reseal(&f);
@@ -314,6 +320,13 @@ TEST(WireReject, RejectsInconsistentBodies) {
   auto decodeBody = [](const Bytes& w) {
     return decodeError(frameAround(w.b, 0, static_cast<std::uint32_t>(w.b.size())));
   };
+  {  // a keyframe flag this version does not define
+    Bytes w = bodyWithOneKeyframe(2);
+    w.b[1 + 1 + 40 + 1 + 1 + 8 + 56 + 1] = 0x03;  // marker, cameras, keyframe count, id, stamp, pose, camera
+    w.vu(0);
+    w.vu(0);
+    EXPECT_NE(decodeBody(w).find("keyframe #0 has unknown flags 3"), std::string::npos) << decodeBody(w);
+  }
   {  // two landmarks claim the same keypoint
     Bytes w = bodyWithOneKeyframe(2);
     w.vu(2);
@@ -345,7 +358,7 @@ TEST(WireReject, RejectsInconsistentBodies) {
   }
   {  // unknown camera is caught by Submap::validate()
     Bytes w = bodyWithOneKeyframe(0);
-    w.b[w.b.size() - 2] = 3;  // camera id 3
+    w.b[w.b.size() - 3] = 3;  // camera id 3 (before the flags byte and the keypoint count)
     w.vu(0); w.vu(0);
     EXPECT_NE(decodeBody(w).find("not valid: keyframe 10 uses camera 3"), std::string::npos)
         << decodeBody(w);

@@ -43,6 +43,7 @@ Submap buildWindow(const std::vector<Keyframe>& kfs, const std::vector<Landmark>
   for (std::size_t k = first; k < last; ++k) {
     Keyframe kf = kfs[k];
     kf.camera_id = 0;
+    kf.lost_before = k < lost_before.size() && lost_before[k];
     for (std::size_t i = 0; i < kf.keypoint_landmark.size(); ++i) {
       const LandmarkId id = kf.keypoint_landmark[i];
       if (id == kInvalidId || id >= lms.size() || lms[id].observations.empty()) {
@@ -110,7 +111,12 @@ std::size_t keepNewestKeyframes(Submap* s, std::size_t max_keyframes) {
   if (s->keyframes.size() <= max_keyframes) return 0;
   const std::size_t drop = s->keyframes.size() - max_keyframes;
   std::unordered_set<KeyframeId> dropped;
-  for (std::size_t i = 0; i < drop; ++i) dropped.insert(s->keyframes[i].id);
+  bool lost = false;  // a loss before a dropped keyframe is one before the new first
+  for (std::size_t i = 0; i <= drop; ++i) {
+    lost = lost || s->keyframes[i].lost_before;
+    if (i < drop) dropped.insert(s->keyframes[i].id);
+  }
+  s->keyframes[drop].lost_before = lost;
   s->keyframes.erase(s->keyframes.begin(), s->keyframes.begin() + static_cast<std::ptrdiff_t>(drop));
   std::vector<Landmark> kept;
   for (Landmark& l : s->landmarks) {

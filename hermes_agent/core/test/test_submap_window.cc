@@ -113,6 +113,19 @@ TEST(SubmapWindow, EdgesFollowTheOdometryNoiseModelAndLostFrames) {
   const Mat6 expected = odometryInformation(s.odometry[0].T_from_to, 60, false, p.odometry);
   EXPECT_TRUE(s.odometry[0].information.isApprox(expected));
   EXPECT_NEAR(s.odometry[0].information(0, 0) / s.odometry[1].information(0, 0), p.odometry.lost_inflation, 1e-6);
+  EXPECT_FALSE(s.keyframes[1].lost_before);
+  EXPECT_TRUE(s.keyframes[2].lost_before);
+  // A loss right before a window's first keyframe has no edge in that window:
+  // the keyframe carries it, so that the server's bridge from the previous
+  // window is as weak as the edge would be.
+  const Submap later = buildWindow(kfs, lms, {0, 0, 1}, 2, kfs.size(), test::roomK(), SubmapHeader(), p);
+  ASSERT_EQ(later.keyframes.size(), 1u);
+  EXPECT_TRUE(later.odometry.empty());
+  EXPECT_TRUE(later.keyframes[0].lost_before);
+  // Keeping only the newest keyframes of a window keeps a loss among the dropped ones.
+  Submap whole = buildWindow(kfs, lms, {0, 1, 0}, 0, kfs.size(), test::roomK(), SubmapHeader(), p);
+  EXPECT_EQ(keepNewestKeyframes(&whole, 1), 2u);
+  EXPECT_TRUE(whole.keyframes[0].lost_before);
 }
 
 TEST(SubmapWindow, DeferredWindowMergesIntoTheNextAndCanBeBounded) {

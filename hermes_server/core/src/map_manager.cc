@@ -68,7 +68,7 @@ MapManager::MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerP
       closer_(params_.loop_closure) {}
 
 Mat6 MapManager::bridgeInformation(const Keyframe& from, const Keyframe& to) const {
-  return odometryInformation(from.T_A_C.inverse() * to.T_A_C, -1, false, params_.odometry);
+  return odometryInformation(from.T_A_C.inverse() * to.T_A_C, -1, to.lost_before, params_.odometry);
 }
 
 void MapManager::storeSubmap(RobotId robot, const Submap& submap,

@@ -89,6 +89,9 @@ struct Keyframe {
   std::vector<Keypoint> keypoints;
   std::vector<Descriptor> descriptors;    ///< one per keypoint
   std::vector<LandmarkId> keypoint_landmark;  ///< per keypoint, kInvalidId if none
+  /// Tracking was lost between the previous keyframe of this session and this
+  /// one (a relocalisation): the odometry across that gap is unreliable.
+  bool lost_before = false;
 };
 
 struct Landmark {

@@ -19,13 +19,14 @@
 //       64    n  body: the submap, written with cereal's PortableBinaryOutputArchive
 //                (little-endian) and optionally zstd-compressed as one zstd frame
 //
-// Body (v1). "vu" is an unsigned LEB128 varint (canonical: no redundant trailing
+// Body (v2; v1 had no keyframe flags byte). "vu" is an unsigned LEB128 varint (canonical: no redundant trailing
 // 0x80 groups), "vz" a zigzag varint of the difference to the previous id:
 //
 //   u8 endianness marker (cereal; must be 1 = little-endian)
 //   vu n_cameras;   n_cameras × { f64 fx, fy, cx, cy; u32 width, height }
 //   vu n_keyframes; n_keyframes × {
 //       vz id; f64 stamp; f64 qw, qx, qy, qz, tx, ty, tz (T_A_C); vu camera_id;
+//       u8 flags (v2; bit 0 = Keyframe::lost_before, other bits must be 0);
 //       vu n_keypoints; f32 u[n]; f32 v[n]; u8 octave[n]; f32 depth[n];
 //       u8 descriptors[32 n] }
 //   vu n_landmarks; n_landmarks × {
@@ -67,7 +68,7 @@
 
 namespace hermes {
 
-constexpr std::uint16_t kWireVersion = 1;
+constexpr std::uint16_t kWireVersion = 2;
 constexpr std::size_t kWireFrameHeaderBytes = 20;    ///< magic .. CRC
 constexpr std::size_t kWireRoutingHeaderBytes = 44;  ///< uuid, session, seq, t_start, t_end
 constexpr std::size_t kWireFixedBytes = kWireFrameHeaderBytes + kWireRoutingHeaderBytes;
