@@ -45,6 +45,8 @@ const char* kUsage =
     "            --set server.pose_graph.odometry_reweight_rounds=0\n"
     "  --loop-information-scale X, --odometry-information-scale X\n"
     "            multiply every loop (odometry) edge's information by X (what-if)\n"
+    "  --poses FILE   write the solved keyframe positions (common alignment) beside\n"
+    "            ground truth: agent,stamp,x,y,z,gt_x,gt_y,gt_z,error_m\n"
     "  --ground-truth-loops\n"
     "            replace every loop's measurement by the ground-truth relative pose\n"
     "            (what-if: how much do the loops' own errors cost?)\n";
@@ -106,6 +108,7 @@ struct Judged {
   std::map<std::string, double> per_agent;
   std::map<std::string, double> rpe_per_agent;  ///< local shape: RPE over kRpeDeltaS
   double all = 0;
+  eval::Alignment alignment;  ///< the common one
 };
 
 constexpr double kRpeDeltaS = 10.0;
@@ -128,6 +131,7 @@ Expected<Judged> judge(const std::vector<std::pair<KeyframeKey, SE3>>& nodes,
   if (!common) return Error{common.error()};
   Judged j;
   j.all = common->trans_m.rmse;
+  j.alignment = common->alignment;
   eval::EvalParams rpe;
   rpe.rpe_delta_s = kRpeDeltaS;
   rpe.rpe_tolerance = 0.5;
@@ -152,6 +156,7 @@ int main(int argc, char** argv) {
   std::string run_dir, init = "odometry", json_out;
   double loop_scale = 1, odometry_scale = 1;
   bool gt_loops = false;
+  std::string poses_out;
   std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -181,6 +186,8 @@ int main(int argc, char** argv) {
         return 2;
       }
       (a[2] == 'l' ? loop_scale : odometry_scale) = x;
+    } else if (a == "--poses") {
+      value(&poses_out);
     } else if (a == "--ground-truth-loops") {
       gt_loops = true;
     } else if (a == "--json") {
@@ -250,6 +257,20 @@ int main(int argc, char** argv) {
   for (const auto& [key, T] : file->nodes) solved.emplace_back(key, *graph->pose(key));
   Expected<Judged> now = judge(solved, *info);
   if (!now) return fail(now.error(), 1);
+  if (!poses_out.empty()) {
+    std::ofstream o(poses_out);
+    o.precision(10);
+    o << "agent,stamp,x,y,z,gt_x,gt_y,gt_z,error_m\n";
+    for (std::size_t i = 0; i < solved.size(); ++i) {
+      const NodeInfo& n = (*info)[i];
+      if (!n.has_gt) continue;
+      const Vec3 p = now->alignment.applyToPoint(solved[i].second.translation());
+      const Vec3 g = n.T_W_C_gt.translation();
+      o << n.agent << ',' << n.stamp << ',' << p.x() << ',' << p.y() << ',' << p.z() << ',' << g.x()
+        << ',' << g.y() << ',' << g.z() << ',' << (p - g).norm() << '\n';
+    }
+    if (!o) return fail("cannot write " + poses_out, 1);
+  }
 
   nlohmann::json j;
   j["run"] = run_dir;
