@@ -334,6 +334,45 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                           run.server().map().landmarkPositionsWorld(), /*binary=*/true);
 }
 
+Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAttempt>& attempts,
+                         const std::string& path) {
+  return writeFile(path, [&](std::ostream& o) {
+    o.precision(9);
+    o << "agent,keyframe,stamp,candidate_agent,candidate_keyframe,candidate_stamp,score,"
+         "normalized_score,island_size,status,reason,matches,inliers,gt_distance_m,gt_angle_deg\n";
+    auto where = [&](const KeyframeKey& k, const OfflineAgent** agent) -> double {
+      *agent = agentOfRobot(run, k.agent);
+      const server::StoredKeyframe* kf = run.server().map().keyframe(k);
+      return kf ? kf->keyframe.stamp : std::nan("");
+    };
+    for (const server::LoopAttempt& a : attempts) {
+      const OfflineAgent* qa = nullptr;
+      const double qs = where(a.query, &qa);
+      o << (qa ? qa->name : "?") << ',' << a.query.id << ',' << (qa ? qs - qa->clock_offset : qs);
+      if (!a.candidate) {
+        o << ",,,,,,,no candidate,,,,,\n";
+        continue;
+      }
+      const OfflineAgent* ca = nullptr;
+      const double cs = where(a.candidate->key, &ca);
+      std::string reason = a.reason;
+      std::replace(reason.begin(), reason.end(), ',', ';');
+      o << ',' << (ca ? ca->name : "?") << ',' << a.candidate->key.id << ','
+        << (ca ? cs - ca->clock_offset : cs) << ',' << a.candidate->score << ','
+        << a.candidate->normalized_score << ',' << a.candidate->island_size << ','
+        << server::toString(a.status) << ',' << reason << ',' << a.matches << ',' << a.inliers << ',';
+      SE3 Tq, Tc;
+      if (qa && ca && gtCameraPose(*qa, qs, &Tq) && gtCameraPose(*ca, cs, &Tc)) {
+        const SE3 d = Tq.inverse() * Tc;
+        o << d.translation().norm() << ',' << rotationAngle(d.rotation()) * 180.0 / M_PI;
+      } else {
+        o << ',';
+      }
+      o << '\n';
+    }
+  });
+}
+
 std::string formatReport(const OfflineRun& run, const RunResults& res) {
   const RunMetrics& m = res.metrics;
   std::ostringstream o;

@@ -42,6 +42,8 @@ const char* kUsage =
     "  OUT/trajectories/<agent>_gt.tum      the dataset's ground truth (body, TUM)\n"
     "  OUT/bandwidth.csv, uplink_estimate.csv, ate_over_time.csv, loops.csv, pose_graph_edges.csv,\n"
     "  global_map.ply, global_map.hgm (binary map: server::GlobalMap::load)\n"
+    "  OUT/loop_attempts.csv                every loop-closure attempt: place candidate, verdict,\n"
+    "                                       true distance/angle between the two views\n"
     "  OUT/pose_graph.g2o, pose_graph_nodes.csv  the last pose graph (g2o text; solve it again\n"
     "                                       with: ./hermes bench pose_graph OUT)\n"
     "  OUT/plots/*.png                      top view, bandwidth, error over time (merged vs\n"
@@ -247,6 +249,9 @@ int main(int argc, char** argv) {
   auto run = system::OfflineRun::create(*params, std::move(sources), (out / "spool").string(),
                                         HERMES_SOURCE_DIR);
   if (!run.ok()) return badInput(run.error());
+  std::vector<server::LoopAttempt> attempts;
+  (*run)->server().mapManager().setAttemptHook(
+      [&attempts](const server::LoopAttempt& a) { attempts.push_back(a); });
   using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
   auto wall = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
@@ -264,6 +269,8 @@ int main(int argc, char** argv) {
   const double wall_s = wall();
   const system::RunResults results = system::evaluateRun(**run);
   if (Status w = system::writeRunResults(**run, results, out.string()); !w) return failure(w.error());
+  if (Status w = system::writeLoopAttempts(**run, attempts, (out / "loop_attempts.csv").string()); !w)
+    return failure(w.error());
   if (args.plots) drawPlots(**run, out);
   if (args.json) {
     std::cout << system::resultsJson(results).dump(2) << "\n";

@@ -167,7 +167,8 @@ std::vector<const Keyframe*> MapManager::neighbours(const KeyframeKey& key,
 }
 
 std::optional<LoopEdge> MapManager::closeLoop(const KeyframeKey& query,
-                                              const KeyframeKey& candidate) {
+                                              const KeyframeKey& candidate,
+                                              LoopClosureResult* result) {
   const StoredKeyframe* q = map_.keyframe(query);
   const StoredKeyframe* c = map_.keyframe(candidate);
   if (!q || !c || query == candidate) return std::nullopt;
@@ -177,6 +178,7 @@ std::optional<LoopEdge> MapManager::closeLoop(const KeyframeKey& query,
   const auto t0 = Clock::now();
   LoopClosureResult r = closer_.close(q->keyframe, qn, qcams, c->keyframe, cn, ccams);
   timings_.add("loop_closure", msSince(t0));
+  if (result) *result = r;
   if (!r.ok()) return std::nullopt;
   LoopEdge e;
   e.a = query;
@@ -199,13 +201,17 @@ void MapManager::detectLoops(const KeyframeKey& key, MergeStats* stats) {
   timings_.add("place_recognition", msSince(t0));
   if (candidate_hook_) candidate_hook_(key, &places.candidates);
   stats->place_candidates += static_cast<int>(places.candidates.size());
+  if (attempt_hook_ && places.candidates.empty()) attempt_hook_(LoopAttempt{key, std::nullopt, LoopStatus::kBadInput, "", 0, 0});
   int tried = 0;
   for (const PlaceCandidate& c : places.candidates) {
     if (tried >= params_.max_candidates_per_keyframe) break;
     if (!map_.keyframe(c.key) || c.key == key) continue;
     ++tried;
     ++stats->loops_attempted;
-    std::optional<LoopEdge> e = closeLoop(key, c.key);
+    LoopClosureResult r;
+    std::optional<LoopEdge> e = closeLoop(key, c.key, &r);
+    if (attempt_hook_)
+      attempt_hook_(LoopAttempt{key, c, r.status, r.reason, r.num_matches, r.num_inliers});
     if (!e) continue;
     ++stats->loops_geometric;
     e->id = next_loop_id_++;

@@ -51,6 +51,14 @@ nlohmann::json resultsJson(const RunResults& results);
 /// Writes every file listed above except config_used.yaml. Errors name the file.
 Status writeRunResults(const OfflineRun& run, const RunResults& results, const std::string& out_dir);
 
+/// Every loop-closure attempt of a run (MapManager::setAttemptHook) as CSV:
+/// query and candidate (agent, keyframe, stamp), place scores, verdict, reason,
+/// matches, inliers, and the true distance [m] and angle [deg] between the two
+/// camera poses (empty without ground truth). Shows which revisits the place
+/// recognition never proposed and which the geometry refused.
+Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAttempt>& attempts,
+                         const std::string& path);
+
 /// A short human-readable report (merged agents, ATE, bytes, kB/s, loops).
 std::string formatReport(const OfflineRun& run, const RunResults& results);
 

@@ -65,11 +65,24 @@ struct GraphDiagnostics {
   int not_converged = 0;   ///< of those, ended without a convergence criterion
 };
 
+/// One loop-closure attempt (diagnostics): a new keyframe's place query and,
+/// per candidate tried, what geometric verification said. A query without any
+/// candidate is reported once with `candidate` empty.
+struct LoopAttempt {
+  KeyframeKey query;
+  std::optional<PlaceCandidate> candidate;
+  LoopStatus status = LoopStatus::kBadInput;
+  std::string reason;  ///< empty when accepted or without a candidate
+  int matches = 0, inliers = 0;
+};
+
 class MapManager {
  public:
   /// Test hooks: rewrite place candidates, or a loop result before PCM.
   using CandidateHook = std::function<void(const KeyframeKey& query, std::vector<PlaceCandidate>*)>;
   using LoopHook = std::function<void(const KeyframeKey& a, const KeyframeKey& b, SE3* T_a_b)>;
+  /// Diagnostics: told every loop-closure attempt of new keyframes.
+  using AttemptHook = std::function<void(const LoopAttempt&)>;
 
   MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerParams params,
              Bookkeeper* bookkeeper);
@@ -96,6 +109,7 @@ class MapManager {
   int agentsMerged() const;
   void setCandidateHook(CandidateHook h) { candidate_hook_ = std::move(h); }
   void setLoopHook(LoopHook h) { loop_hook_ = std::move(h); }
+  void setAttemptHook(AttemptHook h) { attempt_hook_ = std::move(h); }
 
  private:
   /// Stores the window's new keyframes (`added`) and landmarks; keyframe
@@ -106,7 +120,8 @@ class MapManager {
   /// Place recognition + loop closure for a newly stored keyframe.
   void detectLoops(const KeyframeKey& key, MergeStats* stats);
   /// The 17-point loop between two stored keyframes' rigs (no id yet), if verified.
-  std::optional<LoopEdge> closeLoop(const KeyframeKey& query, const KeyframeKey& candidate);
+  std::optional<LoopEdge> closeLoop(const KeyframeKey& query, const KeyframeKey& candidate,
+                                    LoopClosureResult* result = nullptr);
   /// After keyframe extensions: their BoW entries are renewed and every loop
   /// whose rig holds one is closed again; the new measurement replaces the old
   /// one (same id, PCM decides again) unless it has fewer inliers.
@@ -134,6 +149,7 @@ class MapManager {
   std::optional<TrajectoryId> world_traj_;
   CandidateHook candidate_hook_;
   LoopHook loop_hook_;
+  AttemptHook attempt_hook_;
 };
 
 }  // namespace server
