@@ -339,7 +339,7 @@ Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAt
   return writeFile(path, [&](std::ostream& o) {
     o.precision(9);
     o << "agent,keyframe,stamp,candidate_agent,candidate_keyframe,candidate_stamp,score,"
-         "normalized_score,island_size,status,reason,matches,inliers,gt_distance_m,gt_angle_deg\n";
+         "normalized_score,island_size,source,status,reason,matches,inliers,gt_distance_m,gt_angle_deg\n";
     auto where = [&](const KeyframeKey& k, const OfflineAgent** agent) -> double {
       *agent = agentOfRobot(run, k.agent);
       const server::StoredKeyframe* kf = run.server().map().keyframe(k);
@@ -350,7 +350,7 @@ Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAt
       const double qs = where(a.query, &qa);
       o << (qa ? qa->name : "?") << ',' << a.query.id << ',' << (qa ? qs - qa->clock_offset : qs);
       if (!a.candidate) {
-        o << ",,,,,,,no candidate,,,,,\n";
+        o << ",,,,,,,,no candidate,,,,,\n";
         continue;
       }
       const OfflineAgent* ca = nullptr;
@@ -360,7 +360,7 @@ Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAt
       o << ',' << (ca ? ca->name : "?") << ',' << a.candidate->key.id << ','
         << (ca ? cs - ca->clock_offset : cs) << ',' << a.candidate->score << ','
         << a.candidate->normalized_score << ',' << a.candidate->island_size << ','
-        << server::toString(a.status) << ',' << reason << ',' << a.matches << ',' << a.inliers << ',';
+        << (a.spatial ? "map" : "place") << ',' << server::toString(a.status) << ',' << reason << ',' << a.matches << ',' << a.inliers << ',';
       SE3 Tq, Tc;
       if (qa && ca && gtCameraPose(*qa, qs, &Tq) && gtCameraPose(*ca, cs, &Tc)) {
         const SE3 d = Tq.inverse() * Tc;

@@ -29,10 +29,15 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
   struct IntKey { const char* name; int* v; };
   for (IntKey k : {IntKey{"rig_neighbours", &rig_neighbours},
                    IntKey{"max_candidates_per_keyframe", &max_candidates_per_keyframe},
+                   IntKey{"spatial_candidates", &spatial_candidates},
                    IntKey{"optimize_every_submaps", &optimize_every_submaps},
                    IntKey{"min_world_loops", &min_world_loops}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
+  for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
+                         {"spatial_max_angle_deg", &spatial_max_angle_deg}})
+    if (config.has(p + name))
+      if (Status s = config.get(p + name, v); !s) return s;
   if (Status s = odometry.read(config); !s) return s;
   if (Status s = validate(); !s) return Error{p + ": " + s.error()};
   return Status::Ok();
@@ -47,6 +52,9 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "rig_neighbours", rig_neighbours);
   out.set(p + "max_candidates_per_keyframe", max_candidates_per_keyframe);
   out.set(p + "optimize_every_submaps", optimize_every_submaps);
+  out.set(p + "spatial_candidates", spatial_candidates);
+  out.set(p + "spatial_radius_m", spatial_radius_m);
+  out.set(p + "spatial_max_angle_deg", spatial_max_angle_deg);
   out.set(p + "min_world_loops", min_world_loops);
 }
 
@@ -54,6 +62,10 @@ Status MapManagerParams::validate() const {
   if (rig_neighbours < 1) return Error{"rig_neighbours must be >= 1"};
   if (max_candidates_per_keyframe < 0) return Error{"max_candidates_per_keyframe must be >= 0"};
   if (optimize_every_submaps < 0) return Error{"optimize_every_submaps must be >= 0"};
+  if (spatial_candidates < 0) return Error{"spatial_candidates must be >= 0"};
+  if (!(spatial_radius_m > 0)) return Error{"spatial_radius_m must be > 0"};
+  if (!(spatial_max_angle_deg > 0 && spatial_max_angle_deg <= 180))
+    return Error{"spatial_max_angle_deg must be in (0, 180]"};
   if (Status s = odometry.validate(); !s) return Error{"odometry: " + s.error()};
   if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
   return Status::Ok();
@@ -201,22 +213,71 @@ void MapManager::detectLoops(const KeyframeKey& key, MergeStats* stats) {
   timings_.add("place_recognition", msSince(t0));
   if (candidate_hook_) candidate_hook_(key, &places.candidates);
   stats->place_candidates += static_cast<int>(places.candidates.size());
-  if (attempt_hook_ && places.candidates.empty()) attempt_hook_(LoopAttempt{key, std::nullopt, LoopStatus::kBadInput, "", 0, 0});
-  int tried = 0;
-  for (const PlaceCandidate& c : places.candidates) {
-    if (tried >= params_.max_candidates_per_keyframe) break;
-    if (!map_.keyframe(c.key) || c.key == key) continue;
-    ++tried;
+  if (attempt_hook_ && places.candidates.empty())
+    attempt_hook_(LoopAttempt{key, std::nullopt, false, LoopStatus::kBadInput, "", 0, 0});
+  std::vector<KeyframeKey> tried;
+  auto attempt = [&](const PlaceCandidate& c, bool spatial) {
+    tried.push_back(c.key);
     ++stats->loops_attempted;
     LoopClosureResult r;
     std::optional<LoopEdge> e = closeLoop(key, c.key, &r);
     if (attempt_hook_)
-      attempt_hook_(LoopAttempt{key, c, r.status, r.reason, r.num_matches, r.num_inliers});
-    if (!e) continue;
+      attempt_hook_(LoopAttempt{key, c, spatial, r.status, r.reason, r.num_matches, r.num_inliers});
+    if (!e) return;
     ++stats->loops_geometric;
     e->id = next_loop_id_++;
     map_.loops.push_back(*e);
+  };
+  for (const PlaceCandidate& c : places.candidates) {
+    if (static_cast<int>(tried.size()) >= params_.max_candidates_per_keyframe) break;
+    if (!map_.keyframe(c.key) || c.key == key) continue;
+    attempt(c, false);
   }
+  for (const KeyframeKey& k : spatialCandidates(key, q->keyframe.stamp, tried)) {
+    PlaceCandidate c;
+    c.key = k;
+    attempt(c, true);
+  }
+}
+
+std::vector<KeyframeKey> MapManager::spatialCandidates(const KeyframeKey& key, double stamp,
+                                                       const std::vector<KeyframeKey>& tried) const {
+  std::vector<KeyframeKey> out;
+  const TrajectoryMap* qt = map_.trajectory(key.agent, key.session);
+  const StoredKeyframe* q = map_.keyframe(key);
+  if (params_.spatial_candidates == 0 || !qt || !qt->anchored || !q) return out;
+  const Vec3 c_q = q->T_W_C.translation();
+  const Vec3 z_q = q->T_W_C.rotation().col(2);
+  const double cos_max = std::cos(params_.spatial_max_angle_deg * M_PI / 180.0);
+  const int gap = params_.place_recognition.island_id_gap;
+  auto nearTried = [&](const KeyframeKey& k) {
+    for (const KeyframeKey& t : tried)
+      if (t.agent == k.agent && t.session == k.session &&
+          (t.id > k.id ? t.id - k.id : k.id - t.id) <= static_cast<KeyframeId>(gap))
+        return true;
+    return false;
+  };
+  std::vector<std::pair<double, KeyframeKey>> near;
+  for (const auto& [tid, t] : map_.trajectories) {
+    if (!t.anchored) continue;
+    for (const auto& [id, kf] : t.keyframes) {
+      const KeyframeKey k = keyOf(t, id);
+      const double d = (kf.T_W_C.translation() - c_q).norm();
+      if (d > params_.spatial_radius_m || kf.T_W_C.rotation().col(2).dot(z_q) < cos_max) continue;
+      if (recognizer_.excluded(key, stamp, k) || nearTried(k)) continue;
+      near.emplace_back(d, k);
+    }
+  }
+  std::sort(near.begin(), near.end());
+  for (const auto& [d, k] : near) {
+    if (static_cast<int>(out.size()) >= params_.spatial_candidates) break;
+    bool close_to_chosen = false;  // one per place: not next to a chosen one
+    for (const KeyframeKey& o : out)
+      close_to_chosen = close_to_chosen || (o.agent == k.agent && o.session == k.session &&
+                                            (o.id > k.id ? o.id - k.id : k.id - o.id) <= static_cast<KeyframeId>(gap));
+    if (!close_to_chosen) out.push_back(k);
+  }
+  return out;
 }
 
 void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, MergeStats* stats) {

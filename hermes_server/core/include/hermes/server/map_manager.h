@@ -33,6 +33,16 @@ struct MapManagerParams {
   // server.map.*
   int rig_neighbours = 2;              ///< m neighbours per rig side
   int max_candidates_per_keyframe = 2; ///< place candidates verified per keyframe
+  /// Map-based candidates: once its robot is anchored, a new keyframe is also
+  /// tried against up to this many stored keyframes near its estimated world
+  /// pose (nearest first, not next to a place candidate already tried, the
+  /// place recognition's own-recent exclusions apply). Bag-of-words misses
+  /// revisits where texture repeats or light is poor: on whole MH_04 + MH_05 its
+  /// top islands were wrong places for 50 s while the two robots flew the same
+  /// path 0.3-1.5 m apart. 0 = off.
+  int spatial_candidates = 1;
+  double spatial_radius_m = 1.0;       ///< [m] camera centres at most this far apart
+  double spatial_max_angle_deg = 30;   ///< [deg] optical axes at most this far apart
   int optimize_every_submaps = 10;     ///< also optimise after this many merges (0 = only on new loops)
   /// odometry.* (shared with the agents): bridges between windows, where no
   /// edge was sent, get the model's information for their relative pose.
@@ -71,6 +81,7 @@ struct GraphDiagnostics {
 struct LoopAttempt {
   KeyframeKey query;
   std::optional<PlaceCandidate> candidate;
+  bool spatial = false;  ///< a map-based candidate (near the estimated pose), not a place one
   LoopStatus status = LoopStatus::kBadInput;
   std::string reason;  ///< empty when accepted or without a candidate
   int matches = 0, inliers = 0;
@@ -120,6 +131,10 @@ class MapManager {
   /// Place recognition + loop closure for a newly stored keyframe.
   void detectLoops(const KeyframeKey& key, MergeStats* stats);
   /// The 17-point loop between two stored keyframes' rigs (no id yet), if verified.
+  /// Stored keyframes near `key`'s estimated world pose to try as loop
+  /// candidates (spatial_candidates; `tried` are the place candidates).
+  std::vector<KeyframeKey> spatialCandidates(const KeyframeKey& key, double stamp,
+                                             const std::vector<KeyframeKey>& tried) const;
   std::optional<LoopEdge> closeLoop(const KeyframeKey& query, const KeyframeKey& candidate,
                                     LoopClosureResult* result = nullptr);
   /// After keyframe extensions: their BoW entries are renewed and every loop
