@@ -16,7 +16,7 @@ Status PoseGraphParams::read(const Config& config, const std::string& prefix) {
                    config.getChoice(p + "odometry_loss", {"none", "huber", "cauchy"}, &odometry_loss),
                    config.get(p + "odometry_loss_scale", &odometry_loss_scale),
                    config.get(p + "odometry_reweight_rounds", &odometry_reweight_rounds),
-                   config.getChoice(p + "odometry_reweight_scope", {"trajectory", "local"},
+                   config.getChoice(p + "odometry_reweight_scope", {"trajectory", "local", "both"},
                                     &odometry_reweight_scope),
                    config.get(p + "odometry_reweight_window", &odometry_reweight_window),
                    config.get(p + "odometry_reweight_max", &odometry_reweight_max),
@@ -60,8 +60,9 @@ Status PoseGraphParams::validate() const {
   }
   if (!(odometry_loss_scale > 0)) return Error{"odometry_loss_scale must be > 0"};
   if (odometry_reweight_rounds < 0) return Error{"odometry_reweight_rounds must be >= 0"};
-  if (odometry_reweight_scope != "trajectory" && odometry_reweight_scope != "local")
-    return Error{"odometry_reweight_scope must be trajectory or local (got '" + odometry_reweight_scope + "')"};
+  if (odometry_reweight_scope != "trajectory" && odometry_reweight_scope != "local" &&
+      odometry_reweight_scope != "both")
+    return Error{"odometry_reweight_scope must be trajectory, local or both (got '" + odometry_reweight_scope + "')"};
   if (odometry_reweight_window < 0) return Error{"odometry_reweight_window must be >= 0"};
   if (!(odometry_reweight_max >= 1)) return Error{"odometry_reweight_max must be >= 1"};
   if (!(odometry_reweight_floor > 0)) return Error{"odometry_reweight_floor must be > 0"};
@@ -197,35 +198,42 @@ Expected<PoseGraphResult> PoseGraph::optimize() {
 bool PoseGraph::reweightOdometry() {
   // Squared whitened error of every odometry edge under its own information,
   // grouped by trajectory in key order; per edge, the mean chi2 per degree of
-  // freedom of its whole trajectory's edges or of those within +-window of it.
+  // freedom of the edges within +-window of it (`window`) and of its whole
+  // trajectory (`whole`).
   std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::pair<KeyframeKey, std::size_t>>> traj;
   for (std::size_t i = 0; i < odometry_.size(); ++i)
     traj[{odometry_[i].a.agent, odometry_[i].a.session}].emplace_back(odometry_[i].a, i);
-  std::vector<double> chi2(odometry_.size()), local(odometry_.size(), 0.0);
+  if (odometry_.empty()) return false;
+  std::vector<double> chi2(odometry_.size()), window(odometry_.size(), 0.0), whole(odometry_.size(), 0.0);
   for (std::size_t i = 0; i < odometry_.size(); ++i) chi2[i] = edgeChi2(odometry_[i]);
-  const bool whole = params_.odometry_reweight_scope == "trajectory";
   const int w = params_.odometry_reweight_window;
   for (auto& [id, edges] : traj) {
     std::sort(edges.begin(), edges.end());
     const int n = static_cast<int>(edges.size());
+    double total = 0;
+    for (int k = 0; k < n; ++k) total += chi2[edges[k].second];
     for (int k = 0; k < n; ++k) {
       double sum = 0;
       int count = 0;
-      const int lo = whole ? 0 : std::max(0, k - w), hi = whole ? n - 1 : std::min(n - 1, k + w);
-      for (int j = lo; j <= hi; ++j, ++count) sum += chi2[edges[j].second];
-      local[edges[k].second] = sum / (6.0 * count);
+      for (int j = std::max(0, k - w); j <= std::min(n - 1, k + w); ++j, ++count) sum += chi2[edges[j].second];
+      window[edges[k].second] = sum / (6.0 * count);
+      whole[edges[k].second] = total / (6.0 * n);
     }
   }
-  if (local.empty()) return false;
-  // The typical level: most odometry is sound. A stretch whose edges disagree
-  // with the loops that much more than the typical one is trusted that much
-  // less (bounded); sound stretches keep their information.
-  std::vector<double> sorted = local;
+  // The typical level: most odometry is sound, so the median stretch is (per
+  // edge window, which stays meaningful with two robots where a median over
+  // trajectories would be one of them). A robot or stretch that disagrees with
+  // the loops that much more than the typical stretch is trusted that much less
+  // (bounded); sound ones keep their information.
+  std::vector<double> sorted = window;
   std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
   const double typical = std::max(sorted[sorted.size() / 2], params_.odometry_reweight_floor);
+  const std::string& scope = params_.odometry_reweight_scope;
   bool changed = false;
   for (std::size_t i = 0; i < odometry_.size(); ++i) {
-    const double scale = std::clamp(local[i] / typical, 1.0, params_.odometry_reweight_max);
+    const double level = scope == "local" ? window[i] : scope == "trajectory" ? whole[i]
+                                                                              : std::max(window[i], whole[i]);
+    const double scale = std::clamp(level / typical, 1.0, params_.odometry_reweight_max);
     double& current = odometry_scale_[i];
     if (std::abs(scale - current) > 0.1 * current) changed = true;
     current = scale;

@@ -31,10 +31,10 @@ struct PoseGraphParams {
   /// each odometry edge gets the mean chi2 per degree of freedom of a group of
   /// edges around it (scope "trajectory": all edges of its robot's trajectory,
   /// a variance-component estimate per robot; "local": the edges within
-  /// +-window of it); its covariance is scaled by that over the median of all
-  /// edges' values (at least 1, at most reweight_max; the median floored at
-  /// reweight_floor), and the graph solved again; up to this many rounds (0 =
-  /// off). Least squares alone splits a drift among every robot the loops tie
+  /// +-window of it; "both": the larger); its covariance is scaled by that over
+  /// the median of the +-window values of all edges (at least 1, at most
+  /// reweight_max; the median floored at reweight_floor), and the graph solved
+  /// again; up to this many rounds (0 = off). Least squares alone splits a drift among every robot the loops tie
   /// together (the common frame bends); where one robot drifts and the others
   /// agree with each other, its edges carry more of the disagreement, and the
   /// rounds put all of it there. "trajectory" spreads a robot's correction
