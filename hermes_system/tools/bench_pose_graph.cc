@@ -206,6 +206,8 @@ int main(int argc, char** argv) {
   if (run_dir.empty()) return fail(std::string("missing RUN_DIR\n") + kUsage, 2);
   if (init != "odometry" && init != "file") return fail("--init must be odometry or file", 2);
   const fs::path dir(run_dir);
+  if (!fs::is_regular_file(dir / "pose_graph.g2o"))
+    return fail("'" + run_dir + "' is not a finished run: no pose_graph.g2o in it (./hermes run --out DIR writes one)", 2);
   Expected<Config> config = Config::fromFile((dir / "config_used.yaml").string());
   if (!config) return fail(config.error(), 2);
   for (const std::string& s : sets)
