@@ -249,33 +249,31 @@ std::vector<KeyframeKey> MapManager::spatialCandidates(const KeyframeKey& key, d
   const Vec3 c_q = q->T_W_C.translation();
   const Vec3 z_q = q->T_W_C.rotation().col(2);
   const double cos_max = std::cos(params_.spatial_max_angle_deg * M_PI / 180.0);
-  const int gap = params_.place_recognition.island_id_gap;
-  auto nearTried = [&](const KeyframeKey& k) {
-    for (const KeyframeKey& t : tried)
-      if (t.agent == k.agent && t.session == k.session &&
-          (t.id > k.id ? t.id - k.id : k.id - t.id) <= static_cast<KeyframeId>(gap))
-        return true;
-    return false;
+  // One candidate per place: none next to (within an island gap of) a place
+  // candidate already tried or a keyframe already chosen.
+  std::vector<KeyframeKey> taken = tried;
+  const auto gap = static_cast<KeyframeId>(params_.place_recognition.island_id_gap);
+  auto nextToTaken = [&](const KeyframeKey& k) {
+    return std::any_of(taken.begin(), taken.end(), [&](const KeyframeKey& t) {
+      return t.agent == k.agent && t.session == k.session && (t.id > k.id ? t.id - k.id : k.id - t.id) <= gap;
+    });
   };
   std::vector<std::pair<double, KeyframeKey>> near;
   for (const auto& [tid, t] : map_.trajectories) {
     if (!t.anchored) continue;
     for (const auto& [id, kf] : t.keyframes) {
-      const KeyframeKey k = keyOf(t, id);
       const double d = (kf.T_W_C.translation() - c_q).norm();
       if (d > params_.spatial_radius_m || kf.T_W_C.rotation().col(2).dot(z_q) < cos_max) continue;
-      if (recognizer_.excluded(key, stamp, k) || nearTried(k)) continue;
-      near.emplace_back(d, k);
+      const KeyframeKey k = keyOf(t, id);
+      if (!recognizer_.excluded(key, stamp, k)) near.emplace_back(d, k);
     }
   }
   std::sort(near.begin(), near.end());
   for (const auto& [d, k] : near) {
     if (static_cast<int>(out.size()) >= params_.spatial_candidates) break;
-    bool close_to_chosen = false;  // one per place: not next to a chosen one
-    for (const KeyframeKey& o : out)
-      close_to_chosen = close_to_chosen || (o.agent == k.agent && o.session == k.session &&
-                                            (o.id > k.id ? o.id - k.id : k.id - o.id) <= static_cast<KeyframeId>(gap));
-    if (!close_to_chosen) out.push_back(k);
+    if (nextToTaken(k)) continue;
+    out.push_back(k);
+    taken.push_back(k);
   }
   return out;
 }
