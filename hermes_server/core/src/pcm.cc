@@ -46,7 +46,9 @@ Status PcmParams::read(const Config& config, const std::string& prefix) {
                    config.get(p + "exact_max_loops", &exact_max_loops),
                    config.get(p + "min_clique_size", &min_clique_size),
                    config.get(p + "max_segments", &max_segments),
-                   config.get(p + "min_segment_size", &min_segment_size)}) {
+                   config.get(p + "min_segment_size", &min_segment_size),
+                   config.get(p + "drift_fraction", &drift_fraction),
+                   config.get(p + "drift_rad_per_m", &drift_rad_per_m)}) {
     if (!s) return s;
   }
   if (Status s = validate(); !s) return Error{prefix + ": " + s.error()};
@@ -59,6 +61,8 @@ void PcmParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(prefix + ".min_clique_size", min_clique_size);
   w->set(prefix + ".max_segments", max_segments);
   w->set(prefix + ".min_segment_size", min_segment_size);
+  w->set(prefix + ".drift_fraction", drift_fraction);
+  w->set(prefix + ".drift_rad_per_m", drift_rad_per_m);
 }
 
 Status PcmParams::validate() const {
@@ -67,6 +71,8 @@ Status PcmParams::validate() const {
   if (min_clique_size < 1) return Error{"min_clique_size must be >= 1"};
   if (max_segments < 1) return Error{"max_segments must be >= 1"};
   if (min_segment_size < 1) return Error{"min_segment_size must be >= 1"};
+  if (!(drift_fraction >= 0 && drift_fraction < 1)) return Error{"drift_fraction must be in [0, 1)"};
+  if (!(drift_rad_per_m >= 0 && drift_rad_per_m < 1)) return Error{"drift_rad_per_m must be in [0, 1)"};
   return Status::Ok();
 }
 
@@ -110,17 +116,20 @@ Expected<RelativePose> OdometryChain::relative(const KeyframeKey& from, const Ke
   auto it_lo = traj.find(lo), it_hi = traj.find(hi);
   if (it_lo == traj.end() || it_hi == traj.end()) return Error{what + ": unknown keyframe"};
   std::vector<RelativePoseCov> edges;
+  double path = 0;
   for (auto it = it_lo; it != it_hi; ++it) {
     if (!it->second.has_edge_to_next) {
       return Error{what + ": missing odometry edge after keyframe " + std::to_string(it->first)};
     }
     edges.push_back({it->second.T_A_K.inverse() * std::next(it)->second.T_A_K,
                      it->second.covariance_to_next});
+    path += edges.back().T.translation().norm();
   }
   const RelativePoseCov c = composeEdges(edges);
   RelativePose out;
   out.T = forward ? c.T : c.T.inverse();
   out.covariance = forward ? c.covariance : invertedCovariance(c.T, c.covariance);
+  out.path_length_m = path;
   return out;
 }
 
@@ -128,8 +137,15 @@ OdometryQuery OdometryChain::query() const {
   return [this](const KeyframeKey& from, const KeyframeKey& to) { return relative(from, to); };
 }
 
+Mat6 driftAllowance(double path_length_m, const PcmParams& params) {
+  const double st = params.drift_fraction * path_length_m, sr = params.drift_rad_per_m * path_length_m;
+  Vec6 d;
+  d << Vec3::Constant(st * st), Vec3::Constant(sr * sr);
+  return d.asDiagonal();
+}
+
 Expected<double> cycleMahalanobis2(const LoopCandidate& i, const LoopCandidate& j,
-                                   const OdometryQuery& odometry) {
+                                   const OdometryQuery& odometry, const PcmParams& params) {
   Expected<RelativePose> oa = odometry(i.a, j.a);  // T_ai_aj
   if (!oa) return Error{oa.error()};
   Expected<RelativePose> ob = odometry(j.b, i.b);  // T_bj_bi
@@ -141,8 +157,10 @@ Expected<double> cycleMahalanobis2(const LoopCandidate& i, const LoopCandidate& 
   const SE3 C = oa->T * X234;
   const Mat6 A1 = X234.inverse().adjoint(), A2 = X34.inverse().adjoint(), A3 = X4.inverse().adjoint();
   const Mat6 A4 = i.T_a_b.adjoint();  // (Z exp(x))^-1 = Z^-1 exp(-Ad_Z x)
-  const Mat6 cov = A1 * oa->covariance * A1.transpose() + A2 * j.covariance * A2.transpose() +
-                   A3 * ob->covariance * A3.transpose() + A4 * i.covariance * A4.transpose();
+  const Mat6 cov_a = oa->covariance + driftAllowance(oa->path_length_m, params);
+  const Mat6 cov_b = ob->covariance + driftAllowance(ob->path_length_m, params);
+  const Mat6 cov = A1 * cov_a * A1.transpose() + A2 * j.covariance * A2.transpose() +
+                   A3 * cov_b * A3.transpose() + A4 * i.covariance * A4.transpose();
   const Vec6 e = C.log();
   Eigen::LDLT<Mat6> ldlt(cov);
   if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
@@ -169,7 +187,7 @@ PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
     std::vector<std::vector<char>> adj(n, std::vector<char>(n, 0));
     for (int i = 0; i < n; ++i) {
       for (int j = i + 1; j < n; ++j) {
-        Expected<double> d2 = cycleMahalanobis2(group[i], group[j], odometry);
+        Expected<double> d2 = cycleMahalanobis2(group[i], group[j], odometry, params);
         if (!d2) {
           ++res.odometry_failures;
           continue;

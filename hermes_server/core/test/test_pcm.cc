@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <functional>
 #include <random>
 
 #include "hermes/server/pcm.h"
@@ -243,18 +244,20 @@ TEST(Pcm, OdometryChainComposesCovariance) {
   EXPECT_LT((back->T * r->T).log().norm(), 1e-12);
 }
 
-/// Loops between agent 0 (sound odometry) and agent 1, whose odometry jumps
-/// by 0.5 m / 10 deg between keyframes `jump` and jump+1 without knowing it.
-struct JumpWorld {
+/// Loops between agent 0 (sound odometry) and agent 1, whose odometry the
+/// caller corrupts without it knowing: `corrupt(i, rel)` is applied to the
+/// measured edge into keyframe i (rel: its true relative pose). Right loops
+/// every `loop_every` keyframes.
+struct CorruptedWorld {
   World w;
   std::vector<LoopCandidate> loops;
 };
 
-JumpWorld makeJumpWorld(std::mt19937& rng, int n, int jump) {
-  JumpWorld j;
+CorruptedWorld makeCorruptedWorld(std::mt19937& rng, int n, int loop_every,
+                                  const std::function<SE3(int, const SE3&)>& corrupt) {
+  CorruptedWorld j;
   World& w = j.w;
   const double st = 0.005, sr = 0.1 * kDeg;
-  const SE3 kick(expSO3(Vec3(0, 0, 10 * kDeg)), Vec3(0.5, 0, 0));
   for (std::uint32_t a = 0; a < 2; ++a) {
     SE3 T_A_K;
     for (int i = 0; i < n; ++i) {
@@ -263,7 +266,7 @@ JumpWorld makeJumpWorld(std::mt19937& rng, int n, int jump) {
       w.truth[key] = SE3(expSO3(Vec3(0, 0, th + M_PI / 2)), Vec3((5 + 0.3 * a) * std::cos(th), 5 * std::sin(th), 0));
       if (i > 0) {
         const SE3 rel = w.truth.at(w.keys[a].back()).inverse() * w.truth.at(key);
-        T_A_K = T_A_K * rel * SE3::exp(noise(rng, st, sr)) * (a == 1 && i == jump + 1 ? kick : SE3());
+        T_A_K = T_A_K * rel * SE3::exp(noise(rng, st, sr)) * (a == 1 ? corrupt(i, rel) : SE3());
         EXPECT_TRUE(w.chain.addKeyframe(key, T_A_K).ok());
         EXPECT_TRUE(w.chain.addEdge(w.keys[a].back(), key, diagCov(st, sr).inverse()).ok());
       } else {
@@ -273,7 +276,7 @@ JumpWorld makeJumpWorld(std::mt19937& rng, int n, int jump) {
       w.keys[a].push_back(key);
     }
   }
-  for (int i = 1; i < n; i += 3) {  // right loops all along
+  for (int i = 1; i < n; i += loop_every) {  // right loops all along
     LoopCandidate l;
     l.id = j.loops.size();
     l.a = w.keys[0][i];
@@ -285,9 +288,24 @@ JumpWorld makeJumpWorld(std::mt19937& rng, int n, int jump) {
   return j;
 }
 
+/// Agent 1's odometry jumps by 0.5 m / 10 deg between keyframes `jump` and jump+1.
+CorruptedWorld makeJumpWorld(std::mt19937& rng, int n, int jump) {
+  const SE3 kick(expSO3(Vec3(0, 0, 10 * kDeg)), Vec3(0.5, 0, 0));
+  return makeCorruptedWorld(rng, n, 3, [&](int i, const SE3&) { return i == jump + 1 ? kick : SE3(); });
+}
+
+/// Agent 1's odometry drifts silently by `fraction` of the distance (sideways,
+/// as a scale error would not) over keyframes [from, to).
+CorruptedWorld makeDriftWorld(std::mt19937& rng, int n, int loop_every, int from, int to, double fraction) {
+  return makeCorruptedWorld(rng, n, loop_every, [=](int i, const SE3& rel) {
+    if (i < from || i >= to) return SE3();
+    return SE3(Quat::Identity(), Vec3(0, fraction * rel.translation().norm(), 0));
+  });
+}
+
 TEST(Pcm, LoopsOnBothSidesOfAnOdometryJumpAreSegments) {
   std::mt19937 rng(9);
-  JumpWorld j = makeJumpWorld(rng, 60, 35);
+  CorruptedWorld j = makeJumpWorld(rng, 60, 35);
   PcmParams p;
   p.min_clique_size = 3;
   const PcmResult classic = [&] {
@@ -306,7 +324,7 @@ TEST(Pcm, ASecondCliqueAmongTheFirstIsNotASegment) {
   // Wrong loops that agree with each other but interleave with the right ones:
   // no odometry break explains them, so they stay rejected.
   std::mt19937 rng(10);
-  JumpWorld j = makeJumpWorld(rng, 60, 1000);  // no jump
+  CorruptedWorld j = makeJumpWorld(rng, 60, 1000);  // no jump
   const std::size_t right = j.loops.size();
   const SE3 wrong_offset(expSO3(Vec3(0, 0, 25 * kDeg)), Vec3(1.5, -0.8, 0.2));
   for (int i = 10; i < 50; i += 8) {
@@ -324,6 +342,71 @@ TEST(Pcm, ASecondCliqueAmongTheFirstIsNotASegment) {
   EXPECT_EQ(r.segment_cliques, 0);
   for (auto id : r.accepted) EXPECT_LT(id, right) << "a wrong loop was accepted";
   EXPECT_GE(r.accepted.size(), right - 1);
+}
+
+TEST(Pcm, RightLoopsUnderASilentDriftStayConsistent) {
+  // 3 % of the distance over half the circle (~0.5 m), a loop every second
+  // keyframe: without the drift allowance the random-walk model splits them.
+  std::mt19937 rng(11);
+  CorruptedWorld j = makeDriftWorld(rng, 80, 2, 20, 60, 0.03);
+  PcmParams p;
+  p.min_clique_size = 3;
+  PcmParams none = p;
+  none.drift_fraction = 0;
+  none.drift_rad_per_m = 0;
+  const PcmResult before = selectConsistentLoops(j.loops, j.w.chain.query(), none);
+  const PcmResult after = selectConsistentLoops(j.loops, j.w.chain.query(), p);
+  std::printf("drift: %zu loops, accepted without allowance %zu, with %zu\n", j.loops.size(),
+              before.accepted.size(), after.accepted.size());
+  EXPECT_LT(before.accepted.size(), j.loops.size() - 5) << "the drift should defeat the random-walk model";
+  EXPECT_GE(after.accepted.size(), j.loops.size() - 1);
+}
+
+TEST(Pcm, TheDriftAllowanceStillRejectsWrongLoops) {
+  // The same drifting world with wrong loops among the right ones: a wrong
+  // place 0.5-1.5 m / 10-30 deg off, alone or agreeing with other wrong ones.
+  std::mt19937 rng(12);
+  CorruptedWorld j = makeDriftWorld(rng, 80, 2, 20, 60, 0.03);
+  const std::size_t right = j.loops.size();
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int i = 5; i < 75; i += 6) {
+    LoopCandidate l;
+    l.id = j.loops.size();
+    l.a = j.w.keys[0][i];
+    l.b = j.w.keys[1][i + 1];
+    const Vec3 dir = Vec3(u(rng), u(rng), 0.2 * u(rng)).normalized();
+    const double metres = 0.5 + 0.5 * (1 + u(rng)), deg = 10 + 10 * (1 + u(rng));
+    const SE3 off(expSO3(Vec3(0, 0, (u(rng) > 0 ? 1 : -1) * deg * kDeg)), metres * dir);
+    l.T_a_b = j.w.truth.at(l.a).inverse() * off * j.w.truth.at(l.b);
+    l.covariance = diagCov(0.01, 0.2 * kDeg);
+    j.loops.push_back(l);
+  }
+  PcmParams p;
+  p.min_clique_size = 3;
+  const PcmResult r = selectConsistentLoops(j.loops, j.w.chain.query(), p);
+  for (auto id : r.accepted) EXPECT_LT(id, right) << "a wrong loop was accepted";
+  EXPECT_GE(r.accepted.size(), right - 1);
+}
+
+TEST(Pcm, DriftAllowanceGrowsWithThePath) {
+  PcmParams p;
+  p.drift_fraction = 0.02;
+  p.drift_rad_per_m = 0.001;
+  EXPECT_EQ(driftAllowance(0, p), Mat6::Zero());
+  const Mat6 a = driftAllowance(10, p);
+  EXPECT_NEAR(a(0, 0), 0.2 * 0.2, 1e-12);
+  EXPECT_NEAR(a(5, 5), 0.01 * 0.01, 1e-12);
+  EXPECT_NEAR(a(0, 1), 0, 1e-15);
+  // The chain reports its path length in both directions.
+  OdometryChain chain;
+  const KeyframeKey k0{0, 0, 1}, k1{0, 0, 2}, k2{0, 0, 3};
+  ASSERT_TRUE(chain.addKeyframe(k0, SE3()).ok());
+  ASSERT_TRUE(chain.addKeyframe(k1, SE3(Quat::Identity(), Vec3(3, 0, 0))).ok());
+  ASSERT_TRUE(chain.addKeyframe(k2, SE3(Quat::Identity(), Vec3(3, 4, 0))).ok());
+  ASSERT_TRUE(chain.addEdge(k0, k1, diagCov(0.1, 0.01).inverse()).ok());
+  ASSERT_TRUE(chain.addEdge(k1, k2, diagCov(0.1, 0.01).inverse()).ok());
+  EXPECT_NEAR(chain.relative(k0, k2)->path_length_m, 7.0, 1e-9);
+  EXPECT_NEAR(chain.relative(k2, k0)->path_length_m, 7.0, 1e-9);
 }
 
 }  // namespace

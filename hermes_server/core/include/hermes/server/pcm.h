@@ -19,6 +19,17 @@
 // overlaps (keyframe-id ranges disjoint): an odometry break between them
 // explains the inconsistency, and the pose graph's robust odometry loss lets
 // that break give way.
+//
+// Drift allowance: the odometry noise model is a random walk (variance linear
+// in the distance), right for the odometry's noise but not for a systematic
+// drift (a scale error, a textureless stretch), whose error grows linearly with
+// the distance. Under such a drift right loops far apart along the chain look
+// inconsistent and the clique splits them (a silent 3 % drift: half of the
+// right loops rejected). The chain covariance of each cycle therefore gets
+// diag((drift_fraction·d)² I₃, (drift_rad_per_m·d)² I₃), d the path length
+// of the odometry between the two loops. Loops close together along the
+// chain are still judged on the tight random-walk model, so a wrong loop
+// stays inconsistent with its right neighbours.
 #pragma once
 
 #include <cstdint>
@@ -41,6 +52,8 @@ struct PcmParams {
   int min_clique_size = 1;         ///< a group's clique smaller than this is rejected
   int max_segments = 4;            ///< cliques accepted per group at most (1 = the classic PCM)
   int min_segment_size = 3;        ///< loops a clique beyond the first needs at least
+  double drift_fraction = 0.01;    ///< [m/m] translation drift allowed per metre of odometry (0 = none)
+  double drift_rad_per_m = 0.001;  ///< [rad/m] rotation drift allowed per metre of odometry
 
   Status read(const Config& config, const std::string& prefix);
   void write(ConfigWriter* writer, const std::string& prefix) const;
@@ -59,6 +72,7 @@ struct LoopCandidate {
 struct RelativePose {
   SE3 T;                        ///< T_from_to
   Mat6 covariance = Mat6::Zero();  ///< right perturbation
+  double path_length_m = 0;     ///< distance travelled between the two keyframes
 };
 
 /// Odometry between two keyframes of one trajectory (same agent and session).
@@ -100,9 +114,13 @@ PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
                                 const OdometryQuery& odometry, const PcmParams& params);
 
 /// Squared Mahalanobis distance of the cycle formed by loops i and j (both
-/// oriented from trajectory A to trajectory B). Errors come from the odometry.
+/// oriented from trajectory A to trajectory B), the odometry's covariance
+/// widened by the drift allowance of `params`. Errors come from the odometry.
 Expected<double> cycleMahalanobis2(const LoopCandidate& i, const LoopCandidate& j,
-                                   const OdometryQuery& odometry);
+                                   const OdometryQuery& odometry, const PcmParams& params);
+
+/// The drift allowance added to the covariance of odometry over `path_length_m`.
+Mat6 driftAllowance(double path_length_m, const PcmParams& params);
 
 /// Quantile of the chi-square distribution (probability p, dof degrees of freedom).
 double chi2Quantile(double p, int dof);
