@@ -21,6 +21,7 @@ Status PoseGraphParams::read(const Config& config, const std::string& prefix) {
                    config.get(p + "odometry_reweight_window", &odometry_reweight_window),
                    config.get(p + "odometry_reweight_max", &odometry_reweight_max),
                    config.get(p + "odometry_reweight_floor", &odometry_reweight_floor),
+                   config.get(p + "loop_rig_edges", &loop_rig_edges),
                    config.get(p + "anneal_steps", &anneal_steps),
                    config.get(p + "anneal_factor", &anneal_factor),
                    config.get(p + "max_iterations", &max_iterations),
@@ -43,6 +44,7 @@ void PoseGraphParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(p + "odometry_reweight_window", odometry_reweight_window);
   w->set(p + "odometry_reweight_max", odometry_reweight_max);
   w->set(p + "odometry_reweight_floor", odometry_reweight_floor);
+  w->set(p + "loop_rig_edges", loop_rig_edges);
   w->set(p + "anneal_steps", anneal_steps);
   w->set(p + "anneal_factor", anneal_factor);
   w->set(p + "max_iterations", max_iterations);
@@ -66,6 +68,7 @@ Status PoseGraphParams::validate() const {
   if (odometry_reweight_window < 0) return Error{"odometry_reweight_window must be >= 0"};
   if (!(odometry_reweight_max >= 1)) return Error{"odometry_reweight_max must be >= 1"};
   if (!(odometry_reweight_floor > 0)) return Error{"odometry_reweight_floor must be > 0"};
+  if (loop_rig_edges < 0) return Error{"loop_rig_edges must be >= 0"};
   if (anneal_steps < 1) return Error{"anneal_steps must be >= 1"};
   if (!(anneal_factor >= 1)) return Error{"anneal_factor must be >= 1"};
   if (max_iterations < 1) return Error{"max_iterations must be >= 1"};
@@ -176,6 +179,7 @@ Expected<PoseGraphResult> PoseGraph::optimize() {
   if (odometry_.empty() && loops_.empty()) return Error{"pose graph: no edges to optimise"};
   const auto t0 = std::chrono::steady_clock::now();
   odometry_scale_.assign(odometry_.size(), 1.0);
+  loop_scale_.assign(loops_.size(), 1.0);
   PoseGraphResult res;
   for (int round = 0;; ++round) {
     // The first round anneals the robust losses from large scales; later rounds
@@ -238,6 +242,26 @@ bool PoseGraph::reweightOdometry() {
     if (std::abs(scale - current) > 0.1 * current) changed = true;
     current = scale;
   }
+  // Loops whose rigs stand on re-weighted odometry (see loop_rig_edges).
+  const int rig = params_.loop_rig_edges;
+  auto rigScale = [&](const KeyframeKey& k) {
+    if (rig == 0) return 1.0;
+    auto it = traj.find({k.agent, k.session});
+    if (it == traj.end()) return 1.0;
+    const auto& edges = it->second;  // sorted by their first keyframe
+    const int n = static_cast<int>(edges.size());
+    const int p = static_cast<int>(std::lower_bound(edges.begin(), edges.end(), std::make_pair(k, std::size_t{0})) -
+                                   edges.begin());  // the first edge leaving k (or after it)
+    double sum = 0;
+    int count = 0;
+    for (int j = std::max(0, p - rig); j < std::min(n, p + rig); ++j, ++count) sum += odometry_scale_[edges[j].second];
+    return count > 0 ? sum / count : 1.0;
+  };
+  for (std::size_t i = 0; i < loops_.size(); ++i) {
+    const double scale = std::max(rigScale(loops_[i].a), rigScale(loops_[i].b));
+    if (std::abs(scale - loop_scale_[i]) > 0.1 * loop_scale_[i]) changed = true;
+    loop_scale_[i] = scale;
+  }
   return changed;
 }
 
@@ -283,7 +307,7 @@ Expected<PoseGraphResult> PoseGraph::solve(bool anneal) {
   ceres::LossFunctionWrapper* odometry_loss = makeWrapper(params_.odometry_loss, params_.odometry_loss_scale);
   ceres::LossFunctionWrapper* loop_loss = makeWrapper(params_.loop_loss, params_.loop_loss_scale);
   for (std::size_t i = 0; i < odometry_.size(); ++i) addResidual(odometry_[i], odometry_scale_[i], odometry_loss);
-  for (const Edge& e : loops_) addResidual(e, 1.0, loop_loss);
+  for (std::size_t i = 0; i < loops_.size(); ++i) addResidual(loops_[i], loop_scale_[i], loop_loss);
 
   bool any_fixed = false;
   for (auto& [key, node] : nodes_) {
@@ -361,13 +385,14 @@ std::vector<EdgeResidual> PoseGraph::residuals() const {
     x.error_m = err.translation().norm();
     x.error_rad = rotationAngle(err.rotation());
     x.chi2 = edgeChi2(e);
-    x.weight = loop ? robustWeight(params_.loop_loss, params_.loop_loss_scale, x.chi2)
-                    : robustWeight(params_.odometry_loss, params_.odometry_loss_scale, x.chi2 / scale) / scale;
+    x.weight = robustWeight(loop ? params_.loop_loss : params_.odometry_loss,
+                            loop ? params_.loop_loss_scale : params_.odometry_loss_scale, x.chi2 / scale) /
+               scale;
     out.push_back(x);
   };
   for (std::size_t i = 0; i < odometry_.size(); ++i)
     add(odometry_[i], false, i < odometry_scale_.size() ? odometry_scale_[i] : 1.0);
-  for (const Edge& e : loops_) add(e, true, 1.0);
+  for (std::size_t i = 0; i < loops_.size(); ++i) add(loops_[i], true, i < loop_scale_.size() ? loop_scale_[i] : 1.0);
   return out;
 }
 

@@ -88,13 +88,20 @@ struct Outcome {
   double odometry_rmse = 0, merged_rmse = 0;              // the faulty robot
   double sound_odometry_rmse = 0, sound_merged_rmse = 0;  // robot 0
   int loops_accepted = 0, loops_total = 0;
+  double loop_weight_faulty = 0, loop_weight_sound = 0;  // mean weight of loops with / without robot 1
 };
 
 /// Robots 0 (the world) and 2 know their path, robot 1 has `fault`; loops every
 /// kLoopEvery keyframes between each pair, judged by PCM through the odometry,
 /// the accepted ones in the graph. Returns robot 1's errors (and robot 0's).
+PcmParams testPcm() {
+  PcmParams pcm;
+  pcm.min_clique_size = 3;
+  return pcm;
+}
+
 Outcome mergeRobots(Fault fault, bool noise_model, const PoseGraphParams& graph_params,
-                    double drift = 1.0) {
+                    double drift = 1.0, const PcmParams& pcm = testPcm()) {
   std::mt19937 rng(11);
   const std::vector<Robot> robots = {makeRobot(0.0, Fault::kNone, 0, rng), makeRobot(0.4, fault, drift, rng),
                                      makeRobot(-0.4, Fault::kNone, 0, rng)};
@@ -132,8 +139,6 @@ Outcome mergeRobots(Fault fault, bool noise_model, const PoseGraphParams& graph_
       loops.push_back(c);
     }
   }
-  PcmParams pcm;
-  pcm.min_clique_size = 3;
   const PcmResult accepted = selectConsistentLoops(loops, chain.query(), pcm);
   const Mat6 loop_info = *invertSpd(loopCovariance());
   for (std::uint64_t id : accepted.accepted)
@@ -162,6 +167,16 @@ Outcome mergeRobots(Fault fault, bool noise_model, const PoseGraphParams& graph_
   o.merged_rmse = rmse(merged(1), robots[1].truth);
   o.sound_odometry_rmse = rmse(robots[0].odometry, robots[0].truth);
   o.sound_merged_rmse = rmse(merged(0), robots[0].truth);
+  double w_faulty = 0, w_sound = 0;
+  int n_faulty = 0, n_sound = 0;
+  for (const EdgeResidual& e : g.residuals()) {
+    if (!e.loop) continue;
+    const bool faulty = e.a.agent == 1 || e.b.agent == 1;
+    (faulty ? w_faulty : w_sound) += e.weight;
+    ++(faulty ? n_faulty : n_sound);
+  }
+  o.loop_weight_faulty = n_faulty ? w_faulty / n_faulty : 0;
+  o.loop_weight_sound = n_sound ? w_sound / n_sound : 0;
   o.loops_accepted = static_cast<int>(accepted.accepted.size());
   o.loops_total = static_cast<int>(loops.size());
   std::printf("robot 1: odometry %.3f m, merged %.3f m; robot 0: odometry %.3f m, merged %.3f m; loops %d/%d\n",
@@ -197,12 +212,33 @@ TEST(MergeDrift, ADriftWithinTheNoiseModelIsRepairedToo) {
   EXPECT_GT(split.sound_merged_rmse, split.sound_odometry_rmse + 0.03);
 }
 
+TEST(MergeDrift, LoopsOnADriftingRobotsRigsAreTrustedLess) {
+  // A loop's rigs are placed by its robots' odometry: where that odometry is
+  // re-weighted, the loop is trusted less too (loop_rig_edges); loops between
+  // the sound robots keep their weight.
+  const Outcome with = mergeRobots(Fault::kDrift, true, PoseGraphParams(), 1.0 / 3);
+  PoseGraphParams off;
+  off.loop_rig_edges = 0;
+  const Outcome without = mergeRobots(Fault::kDrift, true, off, 1.0 / 3);
+  std::printf("loop weights with robot 1: %.3f (off: %.3f); between the others: %.3f (off: %.3f)\n",
+              with.loop_weight_faulty, without.loop_weight_faulty, with.loop_weight_sound,
+              without.loop_weight_sound);
+  EXPECT_LT(with.loop_weight_faulty, 0.5 * without.loop_weight_faulty);
+  EXPECT_GT(with.loop_weight_sound, 0.8 * without.loop_weight_sound);
+  EXPECT_LT(with.merged_rmse, 0.2 * with.odometry_rmse);
+  EXPECT_LT(with.sound_merged_rmse, with.sound_odometry_rmse + 0.01);
+}
+
 TEST(MergeDrift, TheStiffPerEdgePriorKeepsTheDrift) {
   // The failure this guards against: odometry claimed mm-accurate whatever the
   // distance outweighs the loops, which PCM and the robust loss then give up.
   PoseGraphParams before;  // the graph as it was: no re-weighting
   before.odometry_reweight_rounds = 0;
-  const Outcome o = mergeRobots(Fault::kDrift, false, before);
+  before.loop_rig_edges = 0;
+  PcmParams pcm_before = testPcm();  // and PCM without its drift allowance
+  pcm_before.drift_fraction = 0;
+  pcm_before.drift_rad_per_m = 0;
+  const Outcome o = mergeRobots(Fault::kDrift, false, before, 1.0, pcm_before);
   EXPECT_GT(o.merged_rmse, 0.3 * o.odometry_rmse);
   EXPECT_LT(o.loops_accepted, o.loops_total);  // PCM gives right loops up, too
 }

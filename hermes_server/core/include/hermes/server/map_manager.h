@@ -40,13 +40,11 @@ struct MapManagerParams {
   /// revisits where texture repeats or light is poor: on whole MH_04 + MH_05 its
   /// top islands were wrong places for 50 s while the two robots flew the same
   /// path 0.3-1.5 m apart (whole MH_04 + MH_05: loops 237 -> 479, merged ATE
-  /// 4.22 -> 1.55 cm). Off by default (0) for now: PCM keeps the extra loops
-  /// under a silent drift since its drift allowance, but with two robots the
-  /// drifting robot's loops are biased (their rigs are placed by its odometry)
-  /// and bend the sound robot (meeting clip, 3 % drift: 1.14 -> 2.20 cm; with
-  /// ground-truth loops 0.62 cm). Loop rigs must carry their odometry's
-  /// uncertainty first.
-  int spatial_candidates = 0;
+  /// 4.22 -> 1.55 cm). Under a silent drift these extra right loops used to
+  /// split PCM (fixed by its drift allowance) and, their rigs being placed by
+  /// the drifting odometry, bend the sound robot (fixed by the pose graph's
+  /// loop_rig_edges).
+  int spatial_candidates = 1;
   double spatial_radius_m = 1.0;       ///< [m] camera centres at most this far apart
   double spatial_max_angle_deg = 30;   ///< [deg] optical axes at most this far apart
   int optimize_every_submaps = 10;     ///< also optimise after this many merges (0 = only on new loops)
