@@ -162,15 +162,18 @@ std::vector<const Keyframe*> MapManager::neighbours(const KeyframeKey& key,
   auto self = t->keyframes.find(key.id);
   if (self == t->keyframes.end()) return out;
   cams->push_back(self->second.camera);
-  // Earlier keyframes first, then later ones.
+  // Earlier keyframes first, then later ones; never across a loss of tracking
+  // (lost_before): the odometry that would place them is a relocalisation's.
   auto it = self;
-  while (static_cast<int>(out.size()) < params_.rig_neighbours && it != t->keyframes.begin()) {
+  while (static_cast<int>(out.size()) < params_.rig_neighbours && it != t->keyframes.begin() &&
+         !it->second.keyframe.lost_before) {
     --it;
     out.push_back(&it->second.keyframe);
     cams->push_back(it->second.camera);
   }
   it = std::next(self);
-  while (static_cast<int>(out.size()) < params_.rig_neighbours && it != t->keyframes.end()) {
+  while (static_cast<int>(out.size()) < params_.rig_neighbours && it != t->keyframes.end() &&
+         !it->second.keyframe.lost_before) {
     out.push_back(&it->second.keyframe);
     cams->push_back(it->second.camera);
     ++it;

@@ -54,6 +54,44 @@ TEST(WindowBridges, ALossBeforeAWindowWeakensItsBridge) {
   EXPECT_NEAR(sound / lost, OdometryNoiseParams().lost_inflation, 1e-6 * sound / lost);
 }
 
+TEST(WindowBridges, LoopRigsDoNotReachAcrossALossOfTracking) {
+  fixture::Options options;
+  options.keypoints = 120;
+  auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 12.0, -1}}, options);
+  ASSERT_TRUE(fx.ok()) << fx.error();
+  std::vector<Submap> subs = fx->agents[0].submaps;
+  ASSERT_GE(subs.size(), 1u);
+  ASSERT_GE(subs[0].keyframes.size(), 6u);
+  const std::uint32_t session = subs[0].header.session;
+  const KeyframeId lost_at = subs[0].keyframes[2].id;  // tracking lost between keyframes 1 and 2
+  subs[0].keyframes[2].lost_before = true;
+  auto created = Server::create(ServerParams(), HERMES_SOURCE_DIR);
+  ASSERT_TRUE(created.ok()) << created.error();
+  Server& server = **created;
+  double now = 0;
+  for (const Submap& s : subs) {
+    auto f = encodeSubmap(s);
+    ASSERT_TRUE(f.ok()) << f.error();
+    ASSERT_EQ(server.onFrame(f->data(), f->size(), nullptr, now += 1).verdict, ArrivalVerdict::kAccept);
+    server.process(now, -1);
+  }
+  auto rig = [&](std::size_t index) {
+    std::vector<PinholeIntrinsics> cams;
+    std::vector<KeyframeId> ids;
+    for (const Keyframe* k : server.mapManager().neighbours({0, session, subs[0].keyframes[index].id}, &cams))
+      ids.push_back(k->id);
+    EXPECT_EQ(cams.size(), ids.size() + 1);
+    return ids;
+  };
+  // Rigs take their earlier neighbours first, then later ones.
+  for (KeyframeId id : rig(1)) EXPECT_LT(id, lost_at) << "keyframe 1's rig reaches forward across the loss";
+  for (std::size_t i : {2, 3})
+    for (KeyframeId id : rig(i)) EXPECT_GE(id, lost_at) << "keyframe " << i << "'s rig reaches back across the loss";
+  EXPECT_EQ(rig(1).size(), 1u);
+  EXPECT_EQ(rig(3).size(), 2u);
+  EXPECT_EQ(rig(5).size(), static_cast<std::size_t>(ServerParams().map.rig_neighbours));
+}
+
 }  // namespace
 }  // namespace server
 }  // namespace hermes

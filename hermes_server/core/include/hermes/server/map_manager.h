@@ -117,6 +117,10 @@ class MapManager {
   const GlobalMap& map() const { return map_; }
   const TimingStats& timings() const { return timings_; }
   const GraphDiagnostics& graphDiagnostics() const { return graph_diag_; }
+  /// The loop rig's other keyframes around stored keyframe `key` (rig_neighbours,
+  /// earlier ones first, never across a loss of tracking); `cams` gets the
+  /// cameras of key and then of each neighbour.
+  std::vector<const Keyframe*> neighbours(const KeyframeKey& key, std::vector<PinholeIntrinsics>* cams) const;
   std::size_t loopsAccepted() const;
   std::size_t loopsRejected() const;
   bool hasLoops(RobotId robot) const;
@@ -131,7 +135,6 @@ class MapManager {
   /// extensions append their keypoints to stored keyframes (`extended`).
   void storeSubmap(RobotId robot, const Submap& submap, std::vector<KeyframeKey>* added,
                    std::vector<KeyframeKey>* extended, MergeStats* stats);
-  std::vector<const Keyframe*> neighbours(const KeyframeKey& key, std::vector<PinholeIntrinsics>* cams) const;
   /// Place recognition + loop closure for a newly stored keyframe.
   void detectLoops(const KeyframeKey& key, MergeStats* stats);
   /// The 17-point loop between two stored keyframes' rigs (no id yet), if verified.
