@@ -15,21 +15,28 @@ namespace {
 
 const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
 
-/// Information (translation x diagonal) of every odometry edge of the graph
-/// that enters `key`, after feeding `subs` of one agent to a fresh server.
-double bridgeInformationInto(const std::vector<Submap>& subs, const KeyframeKey& key) {
+/// A fresh server that has merged `subs` of one agent (null on failure).
+std::unique_ptr<Server> serverWith(const std::vector<Submap>& subs) {
   auto created = Server::create(ServerParams(), HERMES_SOURCE_DIR);
   EXPECT_TRUE(created.ok()) << created.error();
-  Server& server = **created;
+  if (!created) return nullptr;
   double now = 0;
   for (const Submap& s : subs) {
     auto f = encodeSubmap(s);
     EXPECT_TRUE(f.ok()) << f.error();
-    const ReceiveResult r = server.onFrame(f->data(), f->size(), nullptr, now += 1);
+    const ReceiveResult r = (*created)->onFrame(f->data(), f->size(), nullptr, now += 1);
     EXPECT_EQ(r.verdict, ArrivalVerdict::kAccept) << r.reason;
-    server.process(now, -1);
+    (*created)->process(now, -1);
   }
-  Expected<PoseGraph> g = server.mapManager().buildPoseGraph();
+  return std::move(*created);
+}
+
+/// Information (translation x diagonal) of every odometry edge of the graph
+/// that enters `key`, after feeding `subs` of one agent to a fresh server.
+double bridgeInformationInto(const std::vector<Submap>& subs, const KeyframeKey& key) {
+  std::unique_ptr<Server> server = serverWith(subs);
+  if (!server) return 0;
+  Expected<PoseGraph> g = server->mapManager().buildPoseGraph();
   EXPECT_TRUE(g.ok()) << g.error();
   if (!g) return 0;
   for (const auto& e : g->measurements())
@@ -65,20 +72,12 @@ TEST(WindowBridges, LoopRigsDoNotReachAcrossALossOfTracking) {
   const std::uint32_t session = subs[0].header.session;
   const KeyframeId lost_at = subs[0].keyframes[2].id;  // tracking lost between keyframes 1 and 2
   subs[0].keyframes[2].lost_before = true;
-  auto created = Server::create(ServerParams(), HERMES_SOURCE_DIR);
-  ASSERT_TRUE(created.ok()) << created.error();
-  Server& server = **created;
-  double now = 0;
-  for (const Submap& s : subs) {
-    auto f = encodeSubmap(s);
-    ASSERT_TRUE(f.ok()) << f.error();
-    ASSERT_EQ(server.onFrame(f->data(), f->size(), nullptr, now += 1).verdict, ArrivalVerdict::kAccept);
-    server.process(now, -1);
-  }
+  std::unique_ptr<Server> server = serverWith(subs);
+  ASSERT_TRUE(server);
   auto rig = [&](std::size_t index) {
     std::vector<PinholeIntrinsics> cams;
     std::vector<KeyframeId> ids;
-    for (const Keyframe* k : server.mapManager().neighbours({0, session, subs[0].keyframes[index].id}, &cams))
+    for (const Keyframe* k : server->mapManager().neighbours({0, session, subs[0].keyframes[index].id}, &cams))
       ids.push_back(k->id);
     EXPECT_EQ(cams.size(), ids.size() + 1);
     return ids;
