@@ -6,6 +6,8 @@
 //   ROS:     image_width, image_height, camera_name, camera_matrix, distortion_model,
 //            distortion_coefficients, rectification_matrix, projection_matrix
 //            (matrices as {rows, cols, data}).
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <vector>
 
@@ -79,10 +81,10 @@ Expected<CameraCalibration> readKalibrCamchain(const std::string& path) {
   return c;
 }
 
-Expected<CameraInfo> readCameraInfoYaml(const std::string& path) {
-  auto root = loadMap(path);
-  if (!root) return Error{root.error()};
-  const Where w{path, ""};
+namespace {
+
+/// One camera_info map (file or message); errors name w.file.
+Expected<CameraInfo> parseCameraInfo(const YAML::Node* root, const Where& w) {
   CameraInfo ci;
   if (get(*root, "camera_name")) ci.camera_name = get(*root, "camera_name").Scalar();
   for (const auto& [key, out] :
@@ -137,12 +139,55 @@ Expected<CameraInfo> readCameraInfoYaml(const std::string& path) {
   return ci;
 }
 
+YAML::Node rosMatrix(int rows, int cols, const double* data) {
+  YAML::Node m;
+  m["rows"] = rows;
+  m["cols"] = cols;
+  YAML::Node d(YAML::NodeType::Sequence);
+  for (int i = 0; i < rows * cols; ++i) d.push_back(data[i]);
+  m["data"] = d;
+  return m;
+}
+
+}  // namespace
+
+Expected<CameraInfo> readCameraInfoYaml(const std::string& path) {
+  auto root = loadMap(path);
+  if (!root) return Error{root.error()};
+  return parseCameraInfo(&*root, Where{path, ""});
+}
+
+Expected<CameraInfo> cameraInfoFromMessage(const CameraInfoMessage& m, const std::string& source) {
+  // The message is checked by the file reader's rules: the same fields in a YAML map.
+  YAML::Node root;
+  root["image_width"] = m.width;
+  root["image_height"] = m.height;
+  root["camera_matrix"] = rosMatrix(3, 3, m.K.data());
+  // Uncalibrated drivers leave R all zero and the model empty: identity, no distortion.
+  const bool r_zero = std::all_of(m.R.begin(), m.R.end(), [](double v) { return v == 0; });
+  const std::array<double, 9> I = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  root["rectification_matrix"] = rosMatrix(3, 3, r_zero ? I.data() : m.R.data());
+  root["projection_matrix"] = rosMatrix(3, 4, m.P.data());
+  root["distortion_model"] =
+      m.distortion_model.empty() && m.D.empty() ? std::string("plumb_bob") : m.distortion_model;
+  root["distortion_coefficients"] = rosMatrix(1, static_cast<int>(m.D.size()), m.D.data());
+  return parseCameraInfo(&root, Where{source, ""});
+}
+
 Expected<CameraCalibration> readCameraInfoPair(const std::string& left_yaml,
                                                const std::string& right_yaml) {
   auto L = readCameraInfoYaml(left_yaml);
   if (!L) return Error{L.error()};
   auto R = readCameraInfoYaml(right_yaml);
   if (!R) return Error{R.error()};
+  return stereoFromCameraInfo(*L, *R, left_yaml, right_yaml);
+}
+
+Expected<CameraCalibration> stereoFromCameraInfo(const CameraInfo& left, const CameraInfo& right,
+                                                 const std::string& left_yaml,
+                                                 const std::string& right_yaml) {
+  const CameraInfo* L = &left;
+  const CameraInfo* R = &right;
   if (L->width != R->width || L->height != R->height)
     return Error{right_yaml + ": key 'image_width'/'image_height' differs from " + left_yaml};
   const auto& Pl = L->P;
@@ -187,6 +232,28 @@ Expected<CameraCalibration> readCameraInfoPair(const std::string& left_yaml,
   c.stereo.left = rectifiedCamera(Pl, T_Cl_Crectl);
   c.stereo.right = rectifiedCamera(Pr, T_Cl_Crectl * T_Crectl_Crectr);
   c.rectified = true;
+  if (Status s = c.validate(); !s) return Error{s.error()};
+  return c;
+}
+
+Expected<CameraCalibration> rgbdFromCameraInfo(const CameraInfo& colour, double depth_scale,
+                                               const std::string& source) {
+  const PinholeRadtan& cam = colour.camera;
+  if (cam.model != DistortionModel::kRadtan || cam.distortionCount() > 5)
+    return Error{source + ": key 'distortion_model' of an RGB-D colour camera must be plumb_bob "
+                          "with at most 5 coefficients (has '" + colour.distortion_model + "')"};
+  if (!(depth_scale > 0))
+    return Error{source + ": depth scale must be > 0 (got " + std::to_string(depth_scale) + ")"};
+  CameraCalibration c;
+  c.kind = CameraCalibration::Kind::kRgbd;
+  c.format = "camera_info";
+  c.source = source;
+  c.width = colour.width;
+  c.height = colour.height;
+  c.rgbd.K = cam.K;
+  for (int i = 0; i < 5; ++i) c.rgbd.dist[i] = cam.dist[i];
+  c.rgbd.depth_scale = depth_scale;
+  c.rgbd.rate_hz = 0;
   if (Status s = c.validate(); !s) return Error{s.error()};
   return c;
 }

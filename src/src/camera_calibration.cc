@@ -10,6 +10,7 @@
 #include "calib_yaml.h"
 #include "dataset_text.h"
 #include "hermes/core/euroc_dataset.h"
+#include "hermes/core/tum_dataset.h"
 
 namespace fs = std::filesystem;
 using namespace hermes::calib_yaml;  // NOLINT: private helpers
@@ -275,8 +276,10 @@ Expected<CameraCalibration> loadCameraCalibration(const std::string& name_or_pat
       return readEurocCalibration(c0.string(), c1.string());
     const fs::path l = fs::path(path) / "left.yaml", r = fs::path(path) / "right.yaml";
     if (fs::exists(l, ec) && fs::exists(r, ec)) return readCameraInfoPair(l.string(), r.string());
+    const fs::path tum = fs::path(path) / "camera.yaml";
+    if (fs::exists(tum, ec)) return readTumCalibration(tum.string());
     return Error{"'" + path + "': folder holds neither cam0/ + cam1/ sensor.yaml (EuRoC) nor " +
-                 "left.yaml + right.yaml (ROS camera_info)"};
+                 "left.yaml + right.yaml (ROS camera_info) nor camera.yaml (TUM)"};
   }
   if (!fs::exists(path, ec)) return Error{"calibration file '" + path + "' does not exist"};
   auto root = loadMap(path);
@@ -294,9 +297,24 @@ Expected<CameraCalibration> loadCameraCalibration(const std::string& name_or_pat
     const std::string file = fs::path(path).filename().string();
     return readEurocCalibration((seq / "cam0" / file).string(), (seq / "cam1" / file).string());
   }
+  if (get(*root, "fx") && get(*root, "depth_scale")) return readTumCalibration(path);
   return Error{path + ": unknown calibration format (no key 'kind' (Hermes camera file), "
-               "'cam0' (Kalibr camchain), 'camera_matrix' (ROS camera_info) or 'T_BS' "
-               "(EuRoC sensor.yaml))"};
+               "'cam0' (Kalibr camchain), 'camera_matrix' (ROS camera_info), 'T_BS' "
+               "(EuRoC sensor.yaml) or 'fx' + 'depth_scale' (TUM camera.yaml))"};
+}
+
+Expected<CameraCalibration> readTumCalibration(const std::string& camera_yaml) {
+  auto cam = readTumCameraYaml(camera_yaml);
+  if (!cam) return Error{cam.error()};
+  CameraCalibration c;
+  c.kind = CameraCalibration::Kind::kRgbd;
+  c.format = "tum";
+  c.source = camera_yaml;
+  c.rgbd = *cam;
+  c.width = cam->K.width;
+  c.height = cam->K.height;
+  if (Status s = c.validate(); !s) return Error{s.error()};
+  return c;
 }
 
 }  // namespace hermes

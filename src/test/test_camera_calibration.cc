@@ -287,6 +287,130 @@ TEST(CameraCalibration, CameraInfoPairWithoutBaselineIsAnError) {
   EXPECT_TRUE(contains(c.error(), "swapped")) << c.error();
 }
 
+// The fields of a camera_info message of `cam` (K, D, R, P).
+CameraInfoMessage infoMessage(const PinholeRadtan& cam, const Mat3& R,
+                              const Eigen::Matrix<double, 3, 4>& P, int n_dist) {
+  CameraInfoMessage m;
+  m.width = cam.K.width;
+  m.height = cam.K.height;
+  m.K = {cam.K.fx, 0, cam.K.cx, 0, cam.K.fy, cam.K.cy, 0, 0, 1};
+  for (int i = 0; i < 9; ++i) m.R[i] = R(i / 3, i % 3);
+  for (int i = 0; i < 12; ++i) m.P[i] = P(i / 4, i % 4);
+  m.distortion_model = n_dist > 0 ? "plumb_bob" : "";
+  m.D.assign(cam.dist.begin(), cam.dist.begin() + n_dist);
+  return m;
+}
+
+TEST(CameraCalibration, CameraInfoMessagesAsTheFilesAre) {
+  // The raw pair of a ROS stereo calibration as messages on topics: the same
+  // calibration as from the files.
+  const StereoRig rig{render::eurocCam0(), render::eurocCam1()};
+  auto rs = rectify(rig);
+  ASSERT_TRUE(rs.ok()) << rs.error();
+  auto L = cameraInfoFromMessage(infoMessage(rig.left, rs->R_rect_left, projection(rs->K, 0), 4),
+                                 "/cam0/camera_info");
+  auto R = cameraInfoFromMessage(
+      infoMessage(rig.right, rs->R_rect_right, projection(rs->K, -rs->K.fx * rs->baseline), 4),
+      "/cam1/camera_info");
+  ASSERT_TRUE(L.ok()) << L.error();
+  ASSERT_TRUE(R.ok()) << R.error();
+  auto c = stereoFromCameraInfo(*L, *R, "/cam0/camera_info", "/cam1/camera_info");
+  ASSERT_TRUE(c.ok()) << c.error();
+  EXPECT_TRUE(c->rectified);
+  EXPECT_EQ(c->source, "/cam0/camera_info + /cam1/camera_info");
+  EXPECT_NEAR(c->stereo.T_Cl_Cr().translation().x(), rs->baseline, 1e-9);
+  ASSERT_TRUE(c->raw_stereo.has_value());
+  EXPECT_LT(rotDiff(c->raw_stereo->T_Cl_Cr(), rig.T_Cl_Cr()), 1e-9);
+  EXPECT_DOUBLE_EQ(c->raw_stereo->left.dist[0], rig.left.dist[0]);
+
+  // An uncalibrated driver: R all zero and no model read as identity, no distortion.
+  PinholeRadtan cam;
+  cam.K = PinholeIntrinsics{600, 600, 320, 240, 640, 480};
+  cam.dist.fill(0);
+  CameraInfoMessage m = infoMessage(cam, Mat3::Identity(), projection(cam.K, 0), 0);
+  m.R.fill(0);
+  auto u = cameraInfoFromMessage(m, "/camera/rgb/camera_info");
+  ASSERT_TRUE(u.ok()) << u.error();
+  EXPECT_FALSE(u->camera.hasDistortion());
+
+  // Errors name the topic and the field.
+  CameraInfoMessage bad = m;
+  bad.K.fill(0);  // a driver without calibration
+  auto e = cameraInfoFromMessage(bad, "/camera/rgb/camera_info");
+  ASSERT_FALSE(e.ok());
+  EXPECT_TRUE(contains(e.error(), "/camera/rgb/camera_info")) << e.error();
+  EXPECT_TRUE(contains(e.error(), "'camera_matrix'")) << e.error();
+  bad = m;
+  bad.distortion_model = "plumb_bob";
+  bad.D = {0.1, 0.2, 0.3};
+  e = cameraInfoFromMessage(bad, "/left/camera_info");
+  ASSERT_FALSE(e.ok());
+  EXPECT_TRUE(contains(e.error(), "/left/camera_info")) << e.error();
+  EXPECT_TRUE(contains(e.error(), "distortion_coefficients")) << e.error();
+  bad = m;
+  bad.distortion_model = "fisheye_foo";
+  bad.D = {0.1, 0.2, 0.3, 0.4};
+  e = cameraInfoFromMessage(bad, "/left/camera_info");
+  ASSERT_FALSE(e.ok());
+  EXPECT_TRUE(contains(e.error(), "'distortion_model'")) << e.error();
+}
+
+TEST(CameraCalibration, RgbdFromCameraInfoMessage) {
+  // TUM fr1's colour camera as a driver would publish it.
+  PinholeRadtan cam;
+  cam.K = PinholeIntrinsics{517.306408, 516.469215, 318.643040, 255.313989, 640, 480};
+  cam.dist = {0.262383, -0.953104, -0.005358, 0.002628, 1.163314, 0, 0, 0};
+  auto info = cameraInfoFromMessage(infoMessage(cam, Mat3::Identity(), projection(cam.K, 0), 5),
+                                    "/camera/rgb/camera_info");
+  ASSERT_TRUE(info.ok()) << info.error();
+  auto c = rgbdFromCameraInfo(*info, 5000, "/camera/rgb/camera_info");
+  ASSERT_TRUE(c.ok()) << c.error();
+  EXPECT_EQ(c->kind, CameraCalibration::Kind::kRgbd);
+  EXPECT_DOUBLE_EQ(c->rgbd.K.fx, 517.306408);
+  EXPECT_DOUBLE_EQ(c->rgbd.dist[4], 1.163314);
+  EXPECT_DOUBLE_EQ(c->rgbd.depth_scale, 5000);
+  // Same as the shipped file.
+  auto fr1 = loadCameraCalibration("tum_fr1", kCameras);
+  ASSERT_TRUE(fr1.ok()) << fr1.error();
+  for (int i = 0; i < 5; ++i) EXPECT_DOUBLE_EQ(c->rgbd.dist[i], fr1->rgbd.dist[i]);
+  // An equidistant lens is not an RGB-D colour camera; a zero depth scale is refused.
+  auto fish = *info;
+  fish.camera.model = DistortionModel::kEquidistant;
+  fish.distortion_model = "equidistant";
+  auto e = rgbdFromCameraInfo(fish, 5000, "/camera/rgb/camera_info");
+  ASSERT_FALSE(e.ok());
+  EXPECT_TRUE(contains(e.error(), "/camera/rgb/camera_info")) << e.error();
+  EXPECT_TRUE(contains(e.error(), "plumb_bob")) << e.error();
+  e = rgbdFromCameraInfo(*info, 0, "/camera/rgb/camera_info");
+  ASSERT_FALSE(e.ok());
+  EXPECT_TRUE(contains(e.error(), "depth scale")) << e.error();
+}
+
+TEST(CameraCalibration, TumCameraYamlAndFolder) {
+  // What the renderer / a TUM folder holds: camera.yaml with fx .. depth_scale.
+  const std::string dir = testDir();
+  write(dir + "/seq/camera.yaml",
+        "fx: 481.2\nfy: 480.0\ncx: 319.5\ncy: 239.5\nwidth: 640\nheight: 480\n"
+        "depth_scale: 5000\nk1: 0.1\nrate_hz: 30\n");
+  write(dir + "/seq/rgb.txt", "");
+  for (const std::string& p : {dir + "/seq", dir + "/seq/camera.yaml"}) {
+    auto c = loadCameraCalibration(p, kCameras);
+    ASSERT_TRUE(c.ok()) << p << ": " << c.error();
+    EXPECT_EQ(c->kind, CameraCalibration::Kind::kRgbd);
+    EXPECT_EQ(c->format, "tum");
+    EXPECT_EQ(c->width, 640);
+    EXPECT_DOUBLE_EQ(c->rgbd.K.fx, 481.2);
+    EXPECT_DOUBLE_EQ(c->rgbd.dist[0], 0.1);
+    EXPECT_DOUBLE_EQ(c->rgbd.depth_scale, 5000);
+  }
+  write(dir + "/bad/camera.yaml", "fx: 481.2\nfy: 480.0\ncx: 319.5\ncy: 239.5\nwidth: 640\n"
+                                   "depth_scale: 5000\n");
+  auto c = loadCameraCalibration(dir + "/bad", kCameras);
+  ASSERT_FALSE(c.ok());
+  EXPECT_TRUE(contains(c.error(), dir + "/bad/camera.yaml")) << c.error();
+  EXPECT_TRUE(contains(c.error(), "height")) << c.error();
+}
+
 TEST(CameraCalibration, HermesStereoAndRgbdRoundTrip) {
   const std::string dir = testDir();
   auto s = loadCameraCalibration(write(dir + "/rig.yaml", kHermesStereo), kCameras);

@@ -25,6 +25,7 @@
 // distortion_model is none, radtan or plumb_bob (the colour camera).
 #pragma once
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -56,7 +57,7 @@ struct CameraCalibration {
   RgbdCamera rgbd;
 
   int width = 0, height = 0;  ///< image size [px]
-  std::string format;  ///< "hermes", "euroc", "kalibr" or "camera_info"
+  std::string format;  ///< "hermes", "euroc", "kalibr", "camera_info" or "tum"
   std::string source;  ///< the file(s) read
 
   /// Consistency of the values (sizes, focal lengths, baseline, rigid T_B_C,
@@ -72,7 +73,9 @@ struct CameraCalibration {
 /// left.yaml + right.yaml. A file's format is detected by its keys: `kind`
 /// (Hermes), `cam0` (Kalibr), `camera_matrix` (ROS camera_info: its partner is
 /// found by swapping left/right in the file name), `T_BS` (EuRoC: the partner
-/// is ../cam1/sensor.yaml). Unknown formats are an error naming the file.
+/// is ../cam1/sensor.yaml), `fx` + `depth_scale` (a TUM / ICL-NUIM
+/// camera.yaml; a TUM folder holding camera.yaml is read the same way).
+/// Unknown formats are an error naming the file.
 Expected<CameraCalibration> loadCameraCalibration(const std::string& name_or_path,
                                                   const std::string& cameras_dir);
 
@@ -109,11 +112,38 @@ struct CameraInfo {
 /// empty D means no distortion).
 Expected<CameraInfo> readCameraInfoYaml(const std::string& path);
 
+/// The fields of a sensor_msgs/CameraInfo message, without ROS (the nodelet
+/// copies them over; see hermes_agent/src/ros_convert.h).
+struct CameraInfoMessage {
+  int width = 0, height = 0;
+  std::string distortion_model;  ///< "" with an empty D: uncalibrated, no distortion
+  std::vector<double> D;
+  std::array<double, 9> K{};   ///< row-major
+  std::array<double, 9> R{};   ///< row-major; all zero (uncalibrated drivers) = identity
+  std::array<double, 12> P{};  ///< row-major 3x4
+};
+/// A camera_info message checked by readCameraInfoYaml's rules; errors start
+/// with `source` (e.g. the topic) and name the field by its YAML key
+/// ("/cam0/camera_info: key 'camera_matrix' must be ...").
+Expected<CameraInfo> cameraInfoFromMessage(const CameraInfoMessage& msg, const std::string& source);
+
 /// A camera_info stereo pair. The right P must carry the baseline
 /// (P[0][3] = -fx' b, b > 0): the result is `rectified` (the pinhole pair of the
 /// P matrices; the body frame is the raw left camera) with `raw_stereo` set.
 /// A pair without a baseline has no extrinsics and is an error.
 Expected<CameraCalibration> readCameraInfoPair(const std::string& left_yaml,
                                                const std::string& right_yaml);
+/// The same rules on two parsed camera_infos (files or messages); `left_source`
+/// and `right_source` name them in errors and in CameraCalibration::source.
+Expected<CameraCalibration> stereoFromCameraInfo(const CameraInfo& left, const CameraInfo& right,
+                                                 const std::string& left_source,
+                                                 const std::string& right_source);
+/// An RGB-D calibration from the colour camera's camera_info: its raw K and
+/// plumb_bob distortion (at most 5 coefficients) with `depth_scale` (16UC1
+/// depth value per metre); the body frame is the colour camera.
+Expected<CameraCalibration> rgbdFromCameraInfo(const CameraInfo& colour, double depth_scale,
+                                               const std::string& source);
+/// A TUM / ICL-NUIM camera.yaml (tum_dataset.h's format) as an RGB-D calibration.
+Expected<CameraCalibration> readTumCalibration(const std::string& camera_yaml);
 
 }  // namespace hermes
