@@ -24,6 +24,7 @@ void AgentPipelineParams::write(ConfigWriter* out) const {
 Status RunParams::read(const Config& config) {
   if (Status s = agent.read(config); !s) return s;
   if (Status s = dataset.read(config); !s) return s;
+  if (Status s = camera_input.read(config); !s) return s;
   if (Status s = eval.read(config, "eval"); !s) return s;
   return validate();
 }
@@ -31,12 +32,14 @@ Status RunParams::read(const Config& config) {
 Status RunParams::validate() const {
   if (Status s = agent.validate(); !s) return s;
   if (Status s = dataset.validate(); !s) return s;
+  if (Status s = camera_input.validate(); !s) return s;
   return eval.validate();
 }
 
 void RunParams::write(ConfigWriter* out) const {
   agent.write(out);
   dataset.write(*out);
+  camera_input.write(out);
   out->set("eval.align", std::string(toString(eval.align)));
   out->set("eval.max_dt", eval.max_dt);
   out->set("eval.rpe_delta_s", eval.rpe_delta_s);

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "hermes/agent/camera_input_params.h"
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/uplink_sender.h"
 #include "hermes/core/config.h"
@@ -34,6 +35,7 @@ struct AgentPipelineParams {
 struct RunParams {
   AgentPipelineParams agent;
   DatasetParams dataset;   ///< section dataset
+  CameraInputParams camera_input;  ///< section camera_input (images from ROS topics)
   eval::EvalParams eval;   ///< section eval
 
   Status read(const Config& config);

@@ -1,0 +1,140 @@
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "hermes/agent/camera_stream.h"
+
+using namespace hermes;
+using namespace hermes::agent;
+
+namespace {
+
+const std::string kCameras = std::string(HERMES_SOURCE_DIR) + "/config/cameras";
+
+CameraCalibration load(const std::string& name) {
+  auto c = loadCameraCalibration(name, kCameras);
+  HERMES_CHECK(c.ok(), c.error());
+  return *c;
+}
+
+InputImage image(double stamp, const std::string& encoding, int type, int w, int h,
+                 double value = 100) {
+  InputImage im;
+  im.stamp = stamp;
+  im.encoding = encoding;
+  im.image = cv::Mat(h, w, type, cv::Scalar::all(value));
+  return im;
+}
+
+bool contains(const std::string& s, const std::string& part) {
+  return s.find(part) != std::string::npos;
+}
+
+}  // namespace
+
+TEST(CameraStream, UnsynchronisedRgbdPairsInOrder) {
+  // TUM-like: 30 Hz colour, depth stamped up to 12 ms away, some depth missing.
+  auto s = CameraStream::create(load("tum_fr3"), {}, "/camera/rgb/image_color",
+                                "/camera/depth/image");
+  ASSERT_TRUE(s.ok()) << s.error();
+  std::vector<double> out;
+  for (int k = 0; k < 60; ++k) {
+    const double t = 100.0 + k / 30.0;
+    const double dt = 0.001 * ((k * 7) % 25 - 12);  // [-12, 12] ms
+    s->pushA(image(t, "rgb8", CV_8UC3, 640, 480));
+    if (k % 10 != 5) s->pushB(image(t + dt, "32FC1", CV_32FC1, 640, 480, 2.0));
+    while (auto f = s->next()) {
+      EXPECT_EQ(f->left.type(), CV_8UC1);
+      EXPECT_EQ(f->depth.type(), CV_32FC1);
+      EXPECT_FLOAT_EQ(f->depth.at<float>(240, 320), 2.0f);
+      out.push_back(f->stamp);
+    }
+  }
+  // Every colour image with a depth partner became a frame, in order; the
+  // last one may still wait for a later depth image.
+  EXPECT_GE(out.size(), 53u);
+  for (std::size_t i = 1; i < out.size(); ++i) EXPECT_GT(out[i], out[i - 1]);
+  const StreamCounters c = s->counters();
+  EXPECT_EQ(c.received_a, 60);
+  EXPECT_EQ(c.received_b, 54);
+  EXPECT_EQ(c.converted, static_cast<std::int64_t>(out.size()));
+  EXPECT_GE(c.unpaired_a, 5);  // the colour images whose depth never came
+  EXPECT_EQ(c.rejected, 0);
+  EXPECT_TRUE(s->problems().empty());
+}
+
+TEST(CameraStream, RejectedPairsAreCountedAndReportedOncePerCause) {
+  auto s = CameraStream::create(load("euroc"), {}, "/cam0/image_raw", "/cam1/image_raw");
+  ASSERT_TRUE(s.ok()) << s.error();
+  EXPECT_TRUE(s->isStereo());
+  for (int k = 0; k < 5; ++k) {
+    const double t = 10 + 0.05 * k;
+    s->pushA(image(t, "yuv422", CV_8UC2, 752, 480));
+    s->pushB(image(t, "yuv422", CV_8UC2, 752, 480));
+    EXPECT_FALSE(s->next().has_value());
+  }
+  for (int k = 5; k < 8; ++k) {  // right in another encoding
+    const double t = 10 + 0.05 * k;
+    s->pushA(image(t, "mono8", CV_8UC1, 752, 480));
+    s->pushB(image(t, "bgr8", CV_8UC3, 752, 480));
+    EXPECT_FALSE(s->next().has_value());
+  }
+  s->pushA(image(11, "mono8", CV_8UC1, 640, 480));  // wrong size
+  s->pushB(image(11, "mono8", CV_8UC1, 640, 480));
+  EXPECT_FALSE(s->next().has_value());
+  s->pushA(image(12, "mono8", CV_8UC1, 752, 480));  // good
+  s->pushB(image(12, "mono8", CV_8UC1, 752, 480));
+  auto f = s->next();
+  ASSERT_TRUE(f.has_value());
+  EXPECT_EQ(f->stamp, 12);
+  EXPECT_EQ(f->left.cols, s->camera().K.width);
+
+  const std::vector<std::string> p = s->problems();
+  ASSERT_EQ(p.size(), 3u);  // one line per cause
+  EXPECT_TRUE(contains(p[0], "unsupported encoding") && contains(p[0], "yuv422")) << p[0];
+  EXPECT_TRUE(contains(p[1], "encodings differ") && contains(p[1], "/cam1/image_raw")) << p[1];
+  EXPECT_TRUE(contains(p[2], "size mismatch") && contains(p[2], "640x480")) << p[2];
+  EXPECT_TRUE(s->problems().empty());  // reported once
+  const StreamCounters c = s->counters();
+  EXPECT_EQ(c.rejected, 9);
+  EXPECT_EQ(c.rejected_by_cause.at("unsupported encoding"), 5);
+  EXPECT_EQ(c.rejected_by_cause.at("encodings differ"), 3);
+  EXPECT_EQ(c.rejected_by_cause.at("size mismatch"), 1);
+  EXPECT_EQ(c.converted, 1);
+}
+
+TEST(CameraStream, StereoStampsThatNeverPairAreReportedOnce) {
+  // The right camera's clock is 40 ms off: nothing pairs within 1 ms.
+  auto s = CameraStream::create(load("euroc"), {}, "/cam0/image_raw", "/cam1/image_raw");
+  ASSERT_TRUE(s.ok()) << s.error();
+  std::vector<std::string> problems;
+  for (int k = 0; k < 40; ++k) {
+    const double t = 5 + 0.05 * k;
+    s->pushA(image(t, "mono8", CV_8UC1, 752, 480));
+    s->pushB(image(t + 0.04, "mono8", CV_8UC1, 752, 480));
+    EXPECT_FALSE(s->next().has_value());
+    for (const std::string& p : s->problems()) problems.push_back(p);
+  }
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_TRUE(contains(problems[0], "never pair")) << problems[0];
+  EXPECT_TRUE(contains(problems[0], "/cam0/image_raw") && contains(problems[0], "/cam1/image_raw"))
+      << problems[0];
+  EXPECT_TRUE(contains(problems[0], "stereo_slop")) << problems[0];
+  EXPECT_EQ(s->counters().paired, 0);
+
+  // The same stamps with a slop that covers the offset pair.
+  CameraInputParams wide;
+  wide.stereo_slop = 0.045;
+  auto w = CameraStream::create(load("euroc"), wide, "l", "r");
+  ASSERT_TRUE(w.ok()) << w.error();
+  int frames = 0;
+  for (int k = 0; k < 40; ++k) {
+    const double t = 5 + 0.05 * k;
+    w->pushA(image(t, "mono8", CV_8UC1, 752, 480));
+    w->pushB(image(t + 0.04, "mono8", CV_8UC1, 752, 480));
+    while (w->next()) ++frames;
+  }
+  EXPECT_EQ(frames, 40);
+  EXPECT_TRUE(w->problems().empty());
+}
