@@ -1,26 +1,37 @@
-// Agent nodelet: one robot. Feeds synchronised rectified images into the
-// ROS-free hermes::agent::AgentPipeline (tracking, local mapping, 5-s windows,
-// distillation, disk spool) and connects its uplink to the server's topics.
-//   in : stereo: left/image_rect + right/image_rect (ExactTime), left|right/camera_info
-//        rgbd  : rgb/image_rect + depth/image_rect (ExactTime), rgb/camera_info
+// Agent nodelet: one robot. Takes camera images as a robot or a rosbag
+// publishes them, pairs and converts them in the ROS-free core (CameraStream:
+// ApproximateSync + CameraInput) and feeds hermes::agent::AgentPipeline
+// (tracking, local mapping, 5-s windows, distillation, disk spool); its uplink
+// goes to the server's topics.
+//   in : stereo: left/image + right/image (sensor_msgs/Image; raw or rectified),
+//        rgbd  : rgb/image + depth/image (16UC1 / 32FC1); remap them to the
+//        robot's topics (agent.launch does). camera_info is read from the
+//        image topics' siblings (<image topic's namespace>/camera_info) when no
+//        ~camera and no ~dataset gives the calibration.
 //        done (std_msgs/Empty): end of the sequence, send the last partial window
 //        /hermes/submap_ack (acks for this agent's uuid)
-//   out: odom (nav_msgs/Odometry, frame <robot>/odom, child <robot>/base_link),
-//        TF <robot>/odom -> <robot>/base_link, /hermes/submap, /hermes/heartbeat (1 Hz)
+//   out: odom (nav_msgs/Odometry, frame <robot>/odom, child <robot>/base_link:
+//        the body frame of the calibration's T_B_C, i.e. the dataset's
+//        ground-truth frame (EuRoC: IMU body; TUM: colour camera); stamped with
+//        the image stamp), TF <robot>/odom -> <robot>/base_link,
+//        /hermes/submap, /hermes/heartbeat (1 Hz)
 //        uplink_status (std_msgs/String JSON, latched; after every new submap and at
 //        1 Hz): session, submaps created by this process, spool pending keys/bytes,
-//        spool cap -- what the delivery tests count as "sent"
-// Params (private): robot (default: the namespace), mode (stereo|rgbd),
-// config (YAML, default config/hermes.yaml), dataset (optional folder: camera and
-// body<-camera extrinsic taken from it instead of camera_info), spool_dir
-// (default /tmp/hermes_spool/<robot>), clear_spool (false: unacked submaps of
-// a previous run are resent). The uplink runs on wall time. All
-// callbacks take one mutex: the pipeline is not thread-safe.
+//        spool cap -- what the delivery tests count as "sent" -- and `frames`:
+//        images received, pairs, frames tracked / lost, rejected per cause
+// Params (private): robot (default: the namespace), camera (a name under
+// config/cameras/ or a calibration file / folder: camera_calibration.h),
+// mode (stereo|rgbd; default: the calibration's kind, else stereo),
+// rectified (auto|true|false: stereo images rectified already; overrides
+// camera_input.stereo_images), config (YAML, default config/hermes.yaml),
+// dataset (folder played by the DatasetPlayer: camera and body<-camera from
+// it), queue_size (per image topic, 30), spool_dir (default
+// /tmp/hermes_spool/<robot>), clear_spool (false: unacked submaps of a
+// previous run are resent). The uplink runs on wall time. Images are paired
+// under one mutex, the pipeline runs under another (it is not thread-safe).
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/SubmapAck.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/time_synchronizer.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -39,28 +50,83 @@
 #include <nlohmann/json.hpp>
 
 #include "hermes/agent/agent_pipeline.h"
+#include "hermes/agent/camera_stream.h"
 #include "hermes/agent/run_config.h"
+#include "hermes/core/dataset.h"
 #include "ros_convert.h"
 
 namespace hermes_agent {
+namespace {
 
-using ImageSub = message_filters::Subscriber<sensor_msgs::Image>;
-using ImageSync = message_filters::TimeSynchronizer<sensor_msgs::Image, sensor_msgs::Image>;
+/// The camera_info topic beside an image topic (image_transport's convention).
+std::string infoTopic(const std::string& image_topic) {
+  const auto slash = image_topic.rfind('/');
+  return (slash == std::string::npos ? std::string() : image_topic.substr(0, slash + 1)) +
+         "camera_info";
+}
+
+/// The calibration of a folder the DatasetPlayer publishes: its images are
+/// rectified (EuRoC) or the raw colour camera (TUM).
+hermes::CameraCalibration datasetCalibration(const hermes::DatasetInfo& info,
+                                             const std::string& dir) {
+  hermes::CameraCalibration c;
+  c.format = "dataset";
+  c.source = dir;
+  c.width = info.K.width;
+  c.height = info.K.height;
+  if (info.kind == hermes::DatasetKind::kEuroc) {
+    hermes::PinholeRadtan left;
+    left.K = info.K;
+    left.dist.fill(0.0);
+    left.T_B_C = info.T_B_C;
+    hermes::PinholeRadtan right = left;
+    right.T_B_C = info.T_B_C * hermes::SE3(hermes::Mat3::Identity(), hermes::Vec3(info.baseline, 0, 0));
+    c.stereo = hermes::StereoRig{left, right};
+    c.rectified = true;
+  } else {
+    c.kind = hermes::CameraCalibration::Kind::kRgbd;
+    c.rgbd = *info.rgbd;
+    c.rgbd.T_B_C = info.T_B_C;
+  }
+  return c;
+}
+
+}  // namespace
 
 class AgentNodelet : public nodelet::Nodelet {
  private:
+  using Status = hermes::Status;
+  using CameraCalibration = hermes::CameraCalibration;
+
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     std::string ns = nh.getNamespace();
     while (!ns.empty() && ns.front() == '/') ns.erase(0, 1);
     pnh.param("robot", robot_, ns.empty() ? std::string("agent") : ns);
-    pnh.param("mode", mode_, std::string("stereo"));
-    std::string config_file = std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", dataset;
+    std::string config_file = std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", dataset,
+                camera, rectified = "auto";
+    pnh.param("mode", mode_, mode_);
     pnh.param("config", config_file, config_file);
     pnh.param("dataset", dataset, dataset);
-    if (mode_ != "stereo" && mode_ != "rgbd") {
+    pnh.param("camera", camera, camera);
+    pnh.param("queue_size", queue_size_, queue_size_);
+    if (pnh.hasParam("rectified")) {  // true/false arrive as bools from roslaunch
+      bool b = false;
+      if (pnh.getParam("rectified", b)) rectified = b ? "true" : "false";
+      else pnh.getParam("rectified", rectified);
+    }
+    if (!mode_.empty() && mode_ != "stereo" && mode_ != "rgbd") {
       NODELET_FATAL("Agent %s: ~mode must be stereo or rgbd, got '%s'", robot_.c_str(), mode_.c_str());
+      return;
+    }
+    if (rectified != "auto" && rectified != "true" && rectified != "false") {
+      NODELET_FATAL("Agent %s: ~rectified must be auto, true or false, got '%s'", robot_.c_str(),
+                    rectified.c_str());
+      return;
+    }
+    if (queue_size_ < 1) {
+      NODELET_FATAL("Agent %s: ~queue_size must be >= 1, got %d", robot_.c_str(), queue_size_);
       return;
     }
     auto config = hermes::agent::loadRunConfig(config_file, {});
@@ -71,6 +137,8 @@ class AgentNodelet : public nodelet::Nodelet {
       return;
     }
     params_ = run.agent;
+    input_params_ = run.camera_input;
+    if (rectified != "auto") input_params_.stereo_images = rectified == "true" ? "rectified" : "raw";
     pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
     bool clear_spool = false;  // tests and demos: start without the previous run's backlog
     pnh.param("clear_spool", clear_spool, clear_spool);
@@ -86,52 +154,173 @@ class AgentNodelet : public nodelet::Nodelet {
         NODELET_WARN("Agent %s: clear_spool: dropped %zu unacknowledged submaps of a previous run",
                      robot_.c_str(), *dropped);
     }
-    if (!dataset.empty()) {  // camera from the dataset folder (rectified K, T_B_C)
+    // The calibration: a dataset folder, a camera file, or later camera_info.
+    if (!dataset.empty() && !camera.empty())
+      NODELET_WARN("Agent %s: ~camera '%s' ignored: the camera comes from ~dataset %s",
+                   robot_.c_str(), camera.c_str(), dataset.c_str());
+    if (!dataset.empty()) {
       auto ds = hermes::Dataset::open(dataset, run.dataset);
       if (!ds.ok()) {
         NODELET_FATAL("Agent %s: dataset %s: %s", robot_.c_str(), dataset.c_str(), ds.error().c_str());
         return;
       }
-      const hermes::DatasetInfo& info = (*ds)->info();
-      camera_ = hermes::agent::AgentCamera{info.K, info.baseline, info.T_B_C};
+      calibration_ = datasetCalibration((*ds)->info(), dataset);
+    } else if (!camera.empty()) {
+      auto c = hermes::loadCameraCalibration(camera, std::string(HERMES_SOURCE_DIR) + "/config/cameras");
+      if (!c.ok()) {
+        NODELET_FATAL("Agent %s: ~camera: %s", robot_.c_str(), c.error().c_str());
+        return;
+      }
+      calibration_ = *c;
     }
+    if (calibration_) {
+      const std::string kind =
+          calibration_->kind == CameraCalibration::Kind::kStereo ? "stereo" : "rgbd";
+      if (mode_.empty()) mode_ = kind;
+      if (mode_ != kind) {
+        NODELET_FATAL("Agent %s: ~mode is %s but the calibration is %s (%s)", robot_.c_str(),
+                      mode_.c_str(), kind.c_str(), calibration_->summary().c_str());
+        return;
+      }
+    }
+    if (mode_.empty()) mode_ = "stereo";
+    const bool stereo = mode_ == "stereo";
+    topic_a_ = nh.resolveName(stereo ? "left/image" : "rgb/image");
+    topic_b_ = nh.resolveName(stereo ? "right/image" : "depth/image");
+
     odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 50);
     submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
     heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
     uplink_status_pub_ = nh.advertise<std_msgs::String>("uplink_status", 20, true);
     ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
     done_sub_ = nh.subscribe("done", 1, &AgentNodelet::onDone, this);
-    const bool stereo = mode_ == "stereo";
-    info_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
-        stereo ? "left/camera_info" : "rgb/camera_info", 5,
-        [this](const sensor_msgs::CameraInfoConstPtr& m) { std::lock_guard<std::mutex> l(mu_); left_info_ = *m; });
-    if (stereo)
-      right_info_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
-          "right/camera_info", 5,
-          [this](const sensor_msgs::CameraInfoConstPtr& m) { std::lock_guard<std::mutex> l(mu_); right_info_ = *m; });
-    first_.subscribe(nh, stereo ? "left/image_rect" : "rgb/image_rect", 10);
-    second_.subscribe(nh, stereo ? "right/image_rect" : "depth/image_rect", 10);
-    sync_ = std::make_unique<ImageSync>(first_, second_, 20);
-    sync_->registerCallback(&AgentNodelet::onImages, this);
+    if (calibration_) {
+      if (!createStream(*calibration_)) return;
+    } else {  // the camera comes from camera_info
+      info_a_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
+          infoTopic(topic_a_), 5, [this](const sensor_msgs::CameraInfoConstPtr& m) { onInfo(m, true); });
+      if (stereo)
+        info_b_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
+            infoTopic(topic_b_), 5, [this](const sensor_msgs::CameraInfoConstPtr& m) { onInfo(m, false); });
+    }
+    ros::TransportHints hints;
+    hints.tcpNoDelay();
+    image_a_sub_ = nh.subscribe<sensor_msgs::Image>(
+        topic_a_, queue_size_, [this](const sensor_msgs::ImageConstPtr& m) { onImage(m, true); },
+        ros::VoidConstPtr(), hints);
+    image_b_sub_ = nh.subscribe<sensor_msgs::Image>(
+        topic_b_, queue_size_, [this](const sensor_msgs::ImageConstPtr& m) { onImage(m, false); },
+        ros::VoidConstPtr(), hints);
     timer_ = nh.createWallTimer(ros::WallDuration(0.2), &AgentNodelet::onTimer, this);
-    NODELET_INFO("Agent %s: %s mode, config %s, spool %s", robot_.c_str(), mode_.c_str(),
+    NODELET_INFO("Agent %s: %s mode from %s + %s, camera %s, config %s, spool %s", robot_.c_str(),
+                 mode_.c_str(), topic_a_.c_str(), topic_b_.c_str(),
+                 calibration_ ? calibration_->summary().c_str()
+                              : ("from " + infoTopic(topic_a_) +
+                                 (stereo ? " + " + infoTopic(topic_b_) : std::string())).c_str(),
                  config_file.c_str(), params_.uplink.buffer.dir.c_str());
   }
 
-  /// Creates the pipeline at the first frame (the camera may come from camera_info).
+  /// The core's pairing and conversion for `calib` (call with stream_mu_ held or
+  /// before the subscriptions exist).
+  bool createStream(const CameraCalibration& calib) {
+    auto s = hermes::agent::CameraStream::create(calib, input_params_, topic_a_, topic_b_);
+    if (!s.ok()) {
+      NODELET_FATAL("Agent %s: camera: %s", robot_.c_str(), s.error().c_str());
+      return false;
+    }
+    stream_ = std::make_unique<hermes::agent::CameraStream>(std::move(*s));
+    NODELET_INFO("Agent %s: camera input: %s", robot_.c_str(), stream_->input().summary().c_str());
+    return true;
+  }
+
+  void onInfo(const sensor_msgs::CameraInfoConstPtr& m, bool first) {
+    std::lock_guard<std::mutex> lock(stream_mu_);
+    if (stream_) return;
+    (first ? info_a_ : info_b_) = *m;
+    const bool stereo = mode_ == "stereo";
+    if (!info_a_ || (stereo && !info_b_)) return;
+    const std::string ta = infoTopic(topic_a_), tb = infoTopic(topic_b_);
+    auto a = hermes::cameraInfoFromMessage(cameraInfoMessage(*info_a_), ta);
+    hermes::Expected<CameraCalibration> calib = hermes::Error{a.ok() ? "" : a.error()};
+    if (a.ok() && stereo) {
+      auto b = hermes::cameraInfoFromMessage(cameraInfoMessage(*info_b_), tb);
+      calib = b.ok() ? hermes::stereoFromCameraInfo(*a, *b, ta, tb) : hermes::Error{b.error()};
+    } else if (a.ok()) {  // ROS drivers publish 16UC1 depth in millimetres
+      const double scale = input_params_.depth_scale_16u > 0 ? input_params_.depth_scale_16u : 1000.0;
+      calib = hermes::rgbdFromCameraInfo(*a, scale, ta);
+    }
+    if (!calib.ok()) {
+      if (calib.error() != info_error_)  // each distinct problem once
+        NODELET_ERROR("Agent %s: camera_info unusable (images are dropped until it is fixed): %s",
+                      robot_.c_str(), calib.error().c_str());
+      info_error_ = calib.error();
+      return;
+    }
+    auto s = hermes::agent::CameraStream::create(*calib, input_params_, topic_a_, topic_b_);
+    if (!s.ok()) {
+      if (s.error() != info_error_)
+        NODELET_ERROR("Agent %s: camera_info unusable: %s", robot_.c_str(), s.error().c_str());
+      info_error_ = s.error();
+      return;
+    }
+    stream_ = std::make_unique<hermes::agent::CameraStream>(std::move(*s));
+    NODELET_INFO("Agent %s: camera from camera_info: %s; input: %s", robot_.c_str(),
+                 calib->summary().c_str(), stream_->input().summary().c_str());
+  }
+
+  void onImage(const sensor_msgs::ImageConstPtr& m, bool first) {
+    {
+      std::lock_guard<std::mutex> lock(stream_mu_);
+      ++(first ? received_a_ : received_b_);
+      if (!stream_) {
+        ++no_camera_;
+        NODELET_ERROR_THROTTLE(10.0, "Agent %s: no usable camera: ~camera and ~dataset are not "
+                               "set and %s has not given a usable camera_info yet%s; %lld images dropped",
+                               robot_.c_str(), infoTopic(first ? topic_a_ : topic_b_).c_str(),
+                               info_error_.empty() ? "" : (" (" + info_error_ + ")").c_str(),
+                               static_cast<long long>(no_camera_));
+        return;
+      }
+      auto image = inputImage(m);
+      if (!image.ok()) {
+        if (++malformed_ == 1)
+          NODELET_ERROR("Agent %s: malformed message on %s: %s", robot_.c_str(),
+                        (first ? topic_a_ : topic_b_).c_str(), image.error().c_str());
+        return;
+      }
+      if (first) stream_->pushA(std::move(*image));
+      else stream_->pushB(std::move(*image));
+      logProblems();
+    }
+    trackReadyFrames();
+  }
+
+  /// Logs each new input problem once (the counts are in uplink_status).
+  void logProblems() {
+    for (const std::string& p : stream_->problems())
+      NODELET_ERROR("Agent %s: input %s (each cause is logged once; counts in uplink_status)",
+                    robot_.c_str(), p.c_str());
+  }
+
+  /// Tracks every converted frame waiting, in stamp order (one caller at a time).
+  void trackReadyFrames() {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (;;) {
+      std::optional<hermes::CameraFrame> frame;
+      {
+        std::lock_guard<std::mutex> l(stream_mu_);
+        frame = stream_->next();
+        logProblems();
+      }
+      if (!frame) return;
+      track(*frame);
+    }
+  }
+
+  /// Creates the pipeline at the first frame.
   bool ensurePipeline() {
     if (pipeline_) return true;
-    if (!camera_) {
-      if (!left_info_ || (mode_ == "stereo" && !right_info_)) return false;
-      auto K = intrinsicsFromInfo(*left_info_);
-      if (!K.ok()) {
-        NODELET_ERROR_THROTTLE(5.0, "Agent %s: %s", robot_.c_str(), K.error().c_str());
-        return false;
-      }
-      camera_ = hermes::agent::AgentCamera{*K, right_info_ ? baselineFromInfo(*right_info_) : 0.0,
-                                           hermes::SE3()};
-    }
-    auto p = hermes::agent::AgentPipeline::create(params_, robot_, *camera_);
+    auto p = hermes::agent::AgentPipeline::create(params_, robot_, stream_->camera());
     if (!p.ok()) {
       NODELET_FATAL("Agent %s: %s", robot_.c_str(), p.error().c_str());
       return false;
@@ -159,32 +348,20 @@ class AgentNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  using Status = hermes::Status;
-
-  void onImages(const sensor_msgs::ImageConstPtr& a, const sensor_msgs::ImageConstPtr& b) {
-    std::lock_guard<std::mutex> lock(mu_);
+  void track(const hermes::CameraFrame& frame) {
     if (!ensurePipeline()) return;
-    hermes::CameraFrame frame;
-    frame.stamp = a->header.stamp.toSec();
-    auto left = greyImage(a);
-    auto other = mode_ == "stereo" ? greyImage(b) : depthImage(b);
-    if (!left.ok() || !other.ok()) {
-      NODELET_ERROR_THROTTLE(2.0, "Agent %s: dropped frame: %s", robot_.c_str(),
-                             (!left.ok() ? left.error() : other.error()).c_str());
-      return;
-    }
-    frame.left = *left;
-    (mode_ == "stereo" ? frame.right : frame.depth) = *other;
     auto r = pipeline_->feed(frame);
     noteSubmitted();
     if (!r.ok()) {
+      ++feed_errors_;
       NODELET_ERROR_THROTTLE(2.0, "Agent %s: %s", robot_.c_str(), r.error().c_str());
       return;
     }
     if (r->status != hermes::TrackingStatus::kOk) return;
+    ++tracked_;
     const hermes::SE3 T_W_B = pipeline_->trajectory().back().T_W_B;
     nav_msgs::Odometry odom;
-    odom.header.stamp = a->header.stamp;
+    odom.header.stamp = ros::Time(frame.stamp);
     odom.header.frame_id = robot_ + "/odom";
     odom.child_frame_id = robot_ + "/base_link";
     odom.pose.pose = toPose(T_W_B);
@@ -254,6 +431,29 @@ class AgentNodelet : public nodelet::Nodelet {
     publishUplinkStatus();
   }
 
+  /// What happened to the images so far (uplink_status "frames").
+  nlohmann::json frameCounts() {
+    nlohmann::json f;
+    std::lock_guard<std::mutex> l(stream_mu_);
+    f["received"] = {{topic_a_, received_a_}, {topic_b_, received_b_}};
+    f["dropped_no_camera"] = no_camera_;
+    f["dropped_malformed"] = malformed_;
+    if (stream_) {
+      const hermes::agent::StreamCounters c = stream_->counters();
+      f["paired"] = c.paired;
+      f["unpaired"] = {{topic_a_, c.unpaired_a}, {topic_b_, c.unpaired_b}};
+      f["out_of_order"] = c.out_of_order;
+      f["converted"] = c.converted;
+      f["rejected"] = c.rejected;
+      f["rejected_by_cause"] = c.rejected_by_cause;
+    }
+    f["fed"] = pipeline_ ? pipeline_->frames() : 0;
+    f["tracked"] = tracked_;
+    f["lost"] = pipeline_ ? pipeline_->lostFrames() : 0;
+    f["feed_errors"] = feed_errors_;
+    return f;
+  }
+
   void publishUplinkStatus() {
     using Keys = std::vector<std::pair<std::uint32_t, std::uint64_t>>;
     auto keys = [](const Keys& k) {
@@ -281,23 +481,30 @@ class AgentNodelet : public nodelet::Nodelet {
     j["spool_file_bytes"] = up.buffer().fileBytes();
     j["spool_cap_bytes"] = static_cast<std::int64_t>(params_.uplink.buffer.max_mbytes * 1e6);
     j["done"] = done_;
+    j["frames"] = frameCounts();
     std_msgs::String m;
     m.data = j.dump();
     uplink_status_pub_.publish(m);
   }
 
-  std::mutex mu_;
+  std::mutex mu_;         ///< the pipeline, uplink bookkeeping
+  std::mutex stream_mu_;  ///< stream_, camera_info, image counters (taken after mu_, never before)
   std::string robot_, mode_, uuid_;
+  std::string topic_a_, topic_b_;  ///< resolved image topics (left|rgb, right|depth)
+  int queue_size_ = 30;
   hermes::agent::AgentPipelineParams params_;
-  std::optional<hermes::agent::AgentCamera> camera_;
-  std::optional<sensor_msgs::CameraInfo> left_info_, right_info_;
+  hermes::agent::CameraInputParams input_params_;
+  std::optional<CameraCalibration> calibration_;  ///< from ~dataset or ~camera
+  std::optional<sensor_msgs::CameraInfo> info_a_, info_b_;
+  std::string info_error_;  ///< the last camera_info problem (logged when it changes)
+  std::unique_ptr<hermes::agent::CameraStream> stream_;
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
+  std::int64_t received_a_ = 0, received_b_ = 0, no_camera_ = 0, malformed_ = 0;
+  std::int64_t tracked_ = 0, feed_errors_ = 0;
   ros::Publisher odom_pub_, submap_pub_, heartbeat_pub_, uplink_status_pub_;
   std::vector<std::pair<std::uint32_t, std::uint64_t>> created_, replayed_;
   bool done_ = false;
-  ros::Subscriber ack_sub_, done_sub_, info_sub_, right_info_sub_;
-  ImageSub first_, second_;
-  std::unique_ptr<ImageSync> sync_;
+  ros::Subscriber ack_sub_, done_sub_, info_a_sub_, info_b_sub_, image_a_sub_, image_b_sub_;
   tf2_ros::TransformBroadcaster tf_;
   ros::WallTimer timer_;
   double last_heartbeat_ = 0;

@@ -1,30 +1,11 @@
 #include "ros_convert.h"
 
-#include <sensor_msgs/image_encodings.h>
+#include <cv_bridge/cv_bridge.h>
 
-#include <cmath>
-#include <opencv2/imgproc.hpp>
+#include <algorithm>
+#include <memory>
 
 namespace hermes_agent {
-namespace enc = sensor_msgs::image_encodings;
-
-hermes::Expected<hermes::PinholeIntrinsics> intrinsicsFromInfo(const sensor_msgs::CameraInfo& info) {
-  hermes::PinholeIntrinsics K;
-  K.fx = info.P[0];
-  K.fy = info.P[5];
-  K.cx = info.P[2];
-  K.cy = info.P[6];
-  K.width = static_cast<int>(info.width);
-  K.height = static_cast<int>(info.height);
-  if (!(K.fx > 0 && K.fy > 0) || K.width <= 0 || K.height <= 0)
-    return hermes::Error{"camera_info of frame '" + info.header.frame_id +
-                         "' has no usable projection matrix P or size"};
-  return K;
-}
-
-double baselineFromInfo(const sensor_msgs::CameraInfo& right) {
-  return right.P[0] > 0 ? -right.P[3] / right.P[0] : 0.0;
-}
 
 sensor_msgs::CameraInfo infoFromIntrinsics(const hermes::PinholeIntrinsics& K, double baseline,
                                            const std::string& frame_id) {
@@ -40,29 +21,53 @@ sensor_msgs::CameraInfo infoFromIntrinsics(const hermes::PinholeIntrinsics& K, d
   return info;
 }
 
-hermes::Expected<cv::Mat> greyImage(const sensor_msgs::ImageConstPtr& msg) {
-  try {
-    if (msg->encoding == enc::MONO8) return cv_bridge::toCvShare(msg)->image;
-    if (msg->encoding == enc::BGR8 || msg->encoding == enc::RGB8)
-      return cv_bridge::toCvCopy(msg, enc::MONO8)->image;
-  } catch (const cv_bridge::Exception& e) {
-    return hermes::Error{std::string("image conversion: ") + e.what()};
-  }
-  return hermes::Error{"image encoding '" + msg->encoding + "' is not mono8/bgr8/rgb8"};
+hermes::CameraInfoMessage cameraInfoMessage(const sensor_msgs::CameraInfo& info) {
+  hermes::CameraInfoMessage m;
+  m.width = static_cast<int>(info.width);
+  m.height = static_cast<int>(info.height);
+  m.distortion_model = info.distortion_model;
+  m.D = info.D;
+  std::copy(info.K.begin(), info.K.end(), m.K.begin());
+  std::copy(info.R.begin(), info.R.end(), m.R.begin());
+  std::copy(info.P.begin(), info.P.end(), m.P.begin());
+  return m;
 }
 
-hermes::Expected<cv::Mat> depthImage(const sensor_msgs::ImageConstPtr& msg) {
+hermes::Expected<hermes::agent::InputImage> inputImage(const sensor_msgs::ImageConstPtr& msg) {
+  hermes::agent::InputImage in;
+  in.stamp = msg->header.stamp.toSec();
+  in.encoding = msg->encoding;
+  in.owner = std::shared_ptr<const void>(msg.get(), [msg](const void*) {});  // holds the message
+  int type = CV_8UC1;
+  bool known = true;
   try {
-    if (msg->encoding == enc::TYPE_32FC1) return cv_bridge::toCvShare(msg)->image;
-    if (msg->encoding == enc::TYPE_16UC1) {
-      cv::Mat m;
-      cv_bridge::toCvShare(msg)->image.convertTo(m, CV_32F, 1e-3);
-      return m;
-    }
-  } catch (const cv_bridge::Exception& e) {
-    return hermes::Error{std::string("depth conversion: ") + e.what()};
+    type = cv_bridge::getCvType(msg->encoding);
+  } catch (const std::exception&) {  // no OpenCV type: the core reports the encoding
+    known = false;
   }
-  return hermes::Error{"depth encoding '" + msg->encoding + "' is not 32FC1/16UC1"};
+  const std::size_t pixel = known ? CV_ELEM_SIZE(type) : 1;
+  const std::size_t row = known ? std::size_t(msg->width) * pixel : msg->step;
+  const std::string what = "image " + msg->encoding + " " + std::to_string(msg->width) + "x" +
+                           std::to_string(msg->height) + " of frame '" + msg->header.frame_id + "'";
+  if (msg->step < row || msg->data.size() < std::size_t(msg->step) * msg->height)
+    return hermes::Error{what + ": step " + std::to_string(msg->step) + " and data size " +
+                         std::to_string(msg->data.size()) + " do not hold its pixels"};
+  const int cols = known ? static_cast<int>(msg->width) : static_cast<int>(msg->step);
+  cv::Mat view(static_cast<int>(msg->height), cols, type,
+               const_cast<std::uint8_t*>(msg->data.data()), msg->step);
+  const std::size_t elem = CV_ELEM_SIZE1(type);
+  if (known && msg->is_bigendian && elem > 1) {  // this host is little-endian
+    cv::Mat swapped = view.clone();
+    for (int y = 0; y < swapped.rows; ++y) {
+      std::uint8_t* p = swapped.ptr<std::uint8_t>(y);
+      for (std::size_t i = 0; i + elem <= swapped.cols * pixel; i += elem) std::reverse(p + i, p + i + elem);
+    }
+    in.image = swapped;
+    in.owner.reset();
+  } else {
+    in.image = view;
+  }
+  return in;
 }
 
 geometry_msgs::Pose toPose(const hermes::SE3& T) {
