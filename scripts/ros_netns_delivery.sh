@@ -69,7 +69,7 @@ command -v roslaunch >/dev/null || skip "roslaunch is not installed (./hermes se
 command -v roscore >/dev/null || skip "roscore is not installed (./hermes setup)"
 DATA="$BUILD/rostest_data/hall_d10_r10/MH_01_easy"
 [[ -f "$BUILD/devel/setup.bash" ]] || fail "$BUILD/devel/setup.bash not found: build the ROS tree first (./hermes build)"
-[[ -d "$DATA" ]] || fail "rendered data $DATA not found (build target hermes_agent_rostest_data)"
+[[ -d "$DATA" ]] || fail "rendered data $DATA not found (build target hermes_tests_multi_agent_data)"
 [[ -f "$BUILD/devel/lib/libhermes_agent_nodelets.so" ]] || fail "agent nodelets not built in $BUILD"
 [[ -x "$BUILD/devel/lib/hermes_server/hermes_server_node" ]] || fail "hermes_server_node not built in $BUILD"
 

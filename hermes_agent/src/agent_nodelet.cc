@@ -272,13 +272,16 @@ class AgentNodelet : public nodelet::Nodelet {
     {
       std::lock_guard<std::mutex> lock(stream_mu_);
       ++(first ? received_a_ : received_b_);
-      if (!stream_) {
-        ++no_camera_;
-        NODELET_ERROR_THROTTLE(10.0, "Agent %s: no usable camera: ~camera and ~dataset are not "
-                               "set and %s has not given a usable camera_info yet%s; %lld images dropped",
-                               robot_.c_str(), infoTopic(first ? topic_a_ : topic_b_).c_str(),
-                               info_error_.empty() ? "" : (" (" + info_error_ + ")").c_str(),
-                               static_cast<long long>(no_camera_));
+      if (!stream_) {  // camera_info may just be a few messages late: complain after 10 images
+        if (++no_camera_ >= 10) {
+          const std::string infos =
+              infoTopic(topic_a_) + (mode_ == "stereo" ? " + " + infoTopic(topic_b_) : "");
+          NODELET_ERROR_THROTTLE(10.0, "Agent %s: no usable camera: ~camera and ~dataset are not "
+                                 "set and %s gave no usable camera_info%s; %lld images dropped",
+                                 robot_.c_str(), infos.c_str(),
+                                 info_error_.empty() ? "" : (" (" + info_error_ + ")").c_str(),
+                                 static_cast<long long>(no_camera_));
+        }
         return;
       }
       auto image = inputImage(m);
