@@ -52,7 +52,7 @@
 #include "hermes/agent/agent_pipeline.h"
 #include "hermes/agent/camera_stream.h"
 #include "hermes/agent/run_config.h"
-#include "hermes/core/dataset.h"
+#include "hermes/agent/dataset_feed.h"
 #include "ros_convert.h"
 
 namespace hermes_agent {
@@ -63,32 +63,6 @@ std::string infoTopic(const std::string& image_topic) {
   const auto slash = image_topic.rfind('/');
   return (slash == std::string::npos ? std::string() : image_topic.substr(0, slash + 1)) +
          "camera_info";
-}
-
-/// The calibration of a folder the DatasetPlayer publishes: its images are
-/// rectified (EuRoC) or the raw colour camera (TUM).
-hermes::CameraCalibration datasetCalibration(const hermes::DatasetInfo& info,
-                                             const std::string& dir) {
-  hermes::CameraCalibration c;
-  c.format = "dataset";
-  c.source = dir;
-  c.width = info.K.width;
-  c.height = info.K.height;
-  if (info.kind == hermes::DatasetKind::kEuroc) {
-    hermes::PinholeRadtan left;
-    left.K = info.K;
-    left.dist.fill(0.0);
-    left.T_B_C = info.T_B_C;
-    hermes::PinholeRadtan right = left;
-    right.T_B_C = info.T_B_C * hermes::SE3(hermes::Mat3::Identity(), hermes::Vec3(info.baseline, 0, 0));
-    c.stereo = hermes::StereoRig{left, right};
-    c.rectified = true;
-  } else {
-    c.kind = hermes::CameraCalibration::Kind::kRgbd;
-    c.rgbd = *info.rgbd;
-    c.rgbd.T_B_C = info.T_B_C;
-  }
-  return c;
 }
 
 }  // namespace
@@ -164,7 +138,7 @@ class AgentNodelet : public nodelet::Nodelet {
         NODELET_FATAL("Agent %s: dataset %s: %s", robot_.c_str(), dataset.c_str(), ds.error().c_str());
         return;
       }
-      calibration_ = datasetCalibration((*ds)->info(), dataset);
+      calibration_ = hermes::datasetCalibration(**ds);
     } else if (!camera.empty()) {
       auto c = hermes::loadCameraCalibration(camera, std::string(HERMES_SOURCE_DIR) + "/config/cameras");
       if (!c.ok()) {
@@ -239,16 +213,13 @@ class AgentNodelet : public nodelet::Nodelet {
     (first ? info_a_ : info_b_) = *m;
     const bool stereo = mode_ == "stereo";
     if (!info_a_ || (stereo && !info_b_)) return;
-    const std::string ta = infoTopic(topic_a_), tb = infoTopic(topic_b_);
-    auto a = hermes::cameraInfoFromMessage(cameraInfoMessage(*info_a_), ta);
-    hermes::Expected<CameraCalibration> calib = hermes::Error{a.ok() ? "" : a.error()};
-    if (a.ok() && stereo) {
-      auto b = hermes::cameraInfoFromMessage(cameraInfoMessage(*info_b_), tb);
-      calib = b.ok() ? hermes::stereoFromCameraInfo(*a, *b, ta, tb) : hermes::Error{b.error()};
-    } else if (a.ok()) {  // ROS drivers publish 16UC1 depth in millimetres
-      const double scale = input_params_.depth_scale_16u > 0 ? input_params_.depth_scale_16u : 1000.0;
-      calib = hermes::rgbdFromCameraInfo(*a, scale, ta);
-    }
+    // ROS drivers publish 16UC1 depth in millimetres.
+    const double scale = input_params_.depth_scale_16u > 0 ? input_params_.depth_scale_16u : 1000.0;
+    const hermes::CameraInfoMessage a = cameraInfoMessage(*info_a_);
+    const std::optional<hermes::CameraInfoMessage> b =
+        stereo ? std::optional(cameraInfoMessage(*info_b_)) : std::nullopt;
+    auto calib = hermes::calibrationFromCameraInfo(a, infoTopic(topic_a_), b ? &*b : nullptr,
+                                                   infoTopic(topic_b_), scale);
     if (!calib.ok()) {
       if (calib.error() != info_error_)  // each distinct problem once
         NODELET_ERROR("Agent %s: camera_info unusable (images are dropped until it is fixed): %s",

@@ -258,4 +258,17 @@ Expected<CameraCalibration> rgbdFromCameraInfo(const CameraInfo& colour, double 
   return c;
 }
 
+Expected<CameraCalibration> calibrationFromCameraInfo(const CameraInfoMessage& left,
+                                                      const std::string& left_source,
+                                                      const CameraInfoMessage* right,
+                                                      const std::string& right_source,
+                                                      double depth_scale) {
+  auto l = cameraInfoFromMessage(left, left_source);
+  if (!l) return Error{l.error()};
+  if (!right) return rgbdFromCameraInfo(*l, depth_scale, left_source);
+  auto r = cameraInfoFromMessage(*right, right_source);
+  if (!r) return Error{r.error()};
+  return stereoFromCameraInfo(*l, *r, left_source, right_source);
+}
+
 }  // namespace hermes

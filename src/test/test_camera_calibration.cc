@@ -355,6 +355,30 @@ TEST(CameraCalibration, CameraInfoMessagesAsTheFilesAre) {
   EXPECT_TRUE(contains(e.error(), "'distortion_model'")) << e.error();
 }
 
+TEST(CameraCalibration, CalibrationFromCameraInfoTopics) {
+  PinholeRadtan cam;
+  cam.K = PinholeIntrinsics{700, 700, 640, 360, 1280, 720};
+  cam.dist.fill(0);
+  const CameraInfoMessage l = infoMessage(cam, Mat3::Identity(), projection(cam.K, 0), 0);
+  const CameraInfoMessage r = infoMessage(cam, Mat3::Identity(), projection(cam.K, -700 * 0.05), 0);
+  auto st = calibrationFromCameraInfo(l, "/infra1/camera_info", &r, "/infra2/camera_info", 1000);
+  ASSERT_TRUE(st.ok()) << st.error();
+  EXPECT_EQ(st->kind, CameraCalibration::Kind::kStereo);
+  EXPECT_TRUE(st->rectified);
+  EXPECT_NEAR(st->stereo.T_Cl_Cr().translation().x(), 0.05, 1e-12);
+  auto rgbd = calibrationFromCameraInfo(l, "/color/camera_info", nullptr, "", 1000);
+  ASSERT_TRUE(rgbd.ok()) << rgbd.error();
+  EXPECT_EQ(rgbd->kind, CameraCalibration::Kind::kRgbd);
+  EXPECT_DOUBLE_EQ(rgbd->rgbd.depth_scale, 1000);
+  // The right camera's problem is named by its topic.
+  CameraInfoMessage bad = r;
+  bad.P[3] = 0;  // no baseline
+  auto e = calibrationFromCameraInfo(l, "/infra1/camera_info", &bad, "/infra2/camera_info", 1000);
+  ASSERT_FALSE(e.ok());
+  EXPECT_TRUE(contains(e.error(), "/infra2/camera_info")) << e.error();
+  EXPECT_TRUE(contains(e.error(), "baseline")) << e.error();
+}
+
 TEST(CameraCalibration, RgbdFromCameraInfoMessage) {
   // TUM fr1's colour camera as a driver would publish it.
   PinholeRadtan cam;

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "hermes/agent/camera_stream.h"
+#include "hermes/agent/dataset_feed.h"
 
 using namespace hermes;
 using namespace hermes::agent;
@@ -137,4 +138,45 @@ TEST(CameraStream, StereoStampsThatNeverPairAreReportedOnce) {
   }
   EXPECT_EQ(frames, 40);
   EXPECT_TRUE(w->problems().empty());
+}
+
+TEST(CameraStream, DatasetCalibrationDescribesTheLoadedFrames) {
+  // The real EuRoC micro clip, rectified by the dataset (what the DatasetPlayer
+  // publishes) and raw: CameraInput must hand the pipeline the same camera and
+  // the same pixels as the dataset's own rectification.
+  const std::string micro = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_V1_01_micro";
+  auto rect = Dataset::open(micro);
+  ASSERT_TRUE(rect.ok()) << rect.error();
+  const DatasetInfo& info = (*rect)->info();
+  const CameraCalibration c = datasetCalibration(**rect);
+  EXPECT_TRUE(c.rectified);
+  EXPECT_EQ(c.source, info.root);
+  auto in = CameraInput::create(c);
+  ASSERT_TRUE(in.ok()) << in.error();
+  EXPECT_DOUBLE_EQ(in->camera().K.fx, info.K.fx);
+  EXPECT_DOUBLE_EQ(in->camera().K.cx, info.K.cx);
+  EXPECT_NEAR(in->camera().baseline, info.baseline, 1e-12);
+  EXPECT_LT((in->camera().T_B_C.inverse() * info.T_B_C).log().norm(), 1e-12);
+  auto f = loadCameraFrame(**rect, 3);
+  ASSERT_TRUE(f.ok()) << f.error();
+  auto passed = in->stereo(f->stamp, f->left, f->right, "mono8");
+  ASSERT_TRUE(passed.ok()) << passed.error();
+  EXPECT_EQ(cv::norm(passed->left, f->left, cv::NORM_INF), 0);
+
+  DatasetParams raw_params;
+  raw_params.rectify = false;
+  auto raw = Dataset::open(micro, raw_params);
+  ASSERT_TRUE(raw.ok()) << raw.error();
+  const CameraCalibration rc = datasetCalibration(**raw);
+  EXPECT_FALSE(rc.rectified);
+  EXPECT_TRUE(rc.stereo.left.hasDistortion());
+  auto rin = CameraInput::create(rc);
+  ASSERT_TRUE(rin.ok()) << rin.error();
+  EXPECT_NEAR(rin->camera().K.fx, info.K.fx, 1e-9);
+  EXPECT_NEAR(rin->camera().baseline, info.baseline, 1e-12);
+  auto fr = loadCameraFrame(**raw, 3);
+  ASSERT_TRUE(fr.ok()) << fr.error();
+  auto rectified = rin->stereo(fr->stamp, fr->left, fr->right, "mono8");
+  ASSERT_TRUE(rectified.ok()) << rectified.error();
+  EXPECT_EQ(cv::norm(rectified->left, f->left, cv::NORM_INF), 0);  // same maps, same pixels
 }

@@ -3,7 +3,9 @@
 //   * Hermes camera files (config/cameras/NAME.yaml, format below);
 //   * EuRoC sensor.yaml pairs (mav0/cam0 + mav0/cam1);
 //   * Kalibr camchain.yaml / camchain-imucam.yaml (pinhole, radtan|equidistant);
-//   * ROS camera_info YAML pairs (camera_calibration_parsers' format).
+//   * ROS camera_info YAML pairs (camera_calibration_parsers' format), and
+//     camera_info messages from topics (CameraInfoMessage, checked alike);
+//   * TUM / ICL-NUIM camera.yaml (tum_dataset.h), as an RGB-D calibration.
 // Every error names the file and the key ("x.yaml:3: key 'left.intrinsics'
 // must be 4 numbers (has 3)").
 //
@@ -143,6 +145,15 @@ Expected<CameraCalibration> stereoFromCameraInfo(const CameraInfo& left, const C
 /// depth value per metre); the body frame is the colour camera.
 Expected<CameraCalibration> rgbdFromCameraInfo(const CameraInfo& colour, double depth_scale,
                                                const std::string& source);
+/// The calibration of a camera publishing camera_info messages: a stereo pair
+/// when `right` is given (stereoFromCameraInfo), else an RGB-D colour camera
+/// with `depth_scale` (rgbdFromCameraInfo). Each message is checked by
+/// cameraInfoFromMessage; errors name the source (topic) and the field.
+Expected<CameraCalibration> calibrationFromCameraInfo(const CameraInfoMessage& left,
+                                                      const std::string& left_source,
+                                                      const CameraInfoMessage* right,
+                                                      const std::string& right_source,
+                                                      double depth_scale);
 /// A TUM / ICL-NUIM camera.yaml (tum_dataset.h's format) as an RGB-D calibration.
 Expected<CameraCalibration> readTumCalibration(const std::string& camera_yaml);
 

@@ -4,6 +4,7 @@
 #include <cstddef>
 
 #include "hermes/agent/tracker.h"
+#include "hermes/core/camera_calibration.h"
 #include "hermes/core/dataset.h"
 
 namespace hermes {
@@ -11,5 +12,12 @@ namespace hermes {
 /// Frame i of `dataset` as a CameraFrame: stereo (left+right, rectified when the
 /// dataset rectifies) for EuRoC, grey + depth [m] for TUM. Errors name the frame.
 Expected<CameraFrame> loadCameraFrame(const Dataset& dataset, std::size_t i);
+
+/// The calibration of the images loadCameraFrame() hands out (and the
+/// DatasetPlayer publishes): EuRoC rectified by the dataset -> a rectified
+/// pinhole pair (K, baseline, T_B_C of the rectified left camera); EuRoC not
+/// rectified -> the raw rig; TUM -> the colour camera with its distortion.
+/// format "dataset", source = the dataset folder.
+CameraCalibration datasetCalibration(const Dataset& dataset);
 
 }  // namespace hermes
