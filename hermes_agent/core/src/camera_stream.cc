@@ -70,7 +70,13 @@ std::optional<CameraFrame> CameraStream::next() {
     }
     auto f = isStereo() ? input_.stereo(a.stamp, a.image, b.image, a.encoding)
                         : input_.rgbd(a.stamp, a.image, a.encoding, b.image, b.encoding);
-    if (f.ok()) return std::move(*f);
+    if (f.ok()) {
+      // The frame outlives the pair: pixels it shares with an input that only
+      // views a buffer (e.g. a message's, released with `owner`) are copied.
+      for (cv::Mat* m : {&f->left, &f->right, &f->depth})
+        if (!m->empty() && m->u == nullptr) *m = m->clone();
+      return std::move(*f);
+    }
     ++rejected_;
     if (input_.lastErrorIsNew()) problems_.push_back(input_.lastErrorCause() + ": " + f.error());
   }

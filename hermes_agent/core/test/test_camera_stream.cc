@@ -140,6 +140,46 @@ TEST(CameraStream, StereoStampsThatNeverPairAreReportedOnce) {
   EXPECT_TRUE(w->problems().empty());
 }
 
+TEST(CameraStream, FramesOwnTheirPixels) {
+  // Rectified mono8 stereo passes through CameraInput unchanged: the frame must
+  // not keep pointing into the input buffers, which go away with their owners
+  // (a ROS message is freed once its pair is handed out).
+  CameraInputParams rectified;
+  rectified.stereo_images = "rectified";
+  CameraCalibration c = load("euroc");
+  auto rect = rectify(c.stereo);
+  ASSERT_TRUE(rect.ok()) << rect.error();
+  c.stereo.left.K = c.stereo.right.K = rect->K;
+  c.stereo.left.dist.fill(0);
+  c.stereo.right.dist.fill(0);
+  c.stereo.left.T_B_C = rect->T_B_Crect;
+  c.stereo.right.T_B_C = rect->T_B_Crect * SE3(Mat3::Identity(), Vec3(rect->baseline, 0, 0));
+  c.rectified = true;
+  c.width = rect->K.width;
+  c.height = rect->K.height;
+  auto s = CameraStream::create(c, rectified, "l", "r");
+  ASSERT_TRUE(s.ok()) << s.error();
+  auto buffer = std::make_shared<std::vector<std::uint8_t>>(std::size_t(c.width) * c.height, 77);
+  std::weak_ptr<std::vector<std::uint8_t>> alive = buffer;
+  for (bool left : {true, false}) {
+    InputImage im;
+    im.stamp = 3.0;
+    im.encoding = "mono8";
+    im.image = cv::Mat(c.height, c.width, CV_8UC1, buffer->data());
+    im.owner = buffer;
+    if (left) s->pushA(std::move(im));
+    else s->pushB(std::move(im));
+  }
+  buffer.reset();  // only the stream holds the buffer now
+  auto f = s->next();
+  ASSERT_TRUE(f.has_value());
+  EXPECT_TRUE(alive.expired()) << "the pair's buffers are released once the frame is out";
+  EXPECT_NE(f->left.u, nullptr) << "the frame must own (reference-count) its pixels";
+  EXPECT_NE(f->right.u, nullptr);
+  EXPECT_EQ(f->left.at<std::uint8_t>(10, 10), 77);
+  EXPECT_EQ(f->right.at<std::uint8_t>(c.height - 1, c.width - 1), 77);
+}
+
 TEST(CameraStream, DatasetCalibrationDescribesTheLoadedFrames) {
   // The real EuRoC micro clip, rectified by the dataset (what the DatasetPlayer
   // publishes) and raw: CameraInput must hand the pipeline the same camera and

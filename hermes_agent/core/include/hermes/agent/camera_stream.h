@@ -66,6 +66,8 @@ class CameraStream {
 
   /// The next pair converted into a frame (stamp: A's), oldest first; pairs
   /// the conversion rejects are counted, noted in problems() and skipped.
+  /// The frame owns its pixels (an input's view of an outside buffer, which
+  /// InputImage::owner keeps only as long as the pair, is copied).
   /// nullopt when no pair is waiting.
   std::optional<CameraFrame> next();
 
