@@ -1,5 +1,6 @@
 #include "hermes/agent/approximate_sync.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -30,6 +31,7 @@ StampPairer::StampPairer(const SyncParams& params) : params_(params) {
 void StampPairer::reset() {
   a_.clear();
   b_.clear();
+  b_gaps_.clear();
   have_a_ = have_b_ = false;
 }
 
@@ -58,6 +60,10 @@ bool StampPairer::push(bool is_a, double stamp, std::vector<Op>* ops) {
     ++stats_.out_of_order;
     return false;
   }
+  if (!is_a && have) {  // the B stream's rhythm: its last kRhythmGaps intervals
+    b_gaps_.push_back(stamp - newest);
+    if (int(b_gaps_.size()) > kRhythmGaps) b_gaps_.pop_front();
+  }
   newest = stamp;
   (is_a ? have_a_ : have_b_) = true;
   std::deque<double>& q = is_a ? a_ : b_;
@@ -73,6 +79,18 @@ bool StampPairer::push(bool is_a, double stamp, std::vector<Op>* ops) {
   q.push_back(stamp);
   match(ops);
   return true;
+}
+
+double StampPairer::minGapB() const {
+  if (int(b_gaps_.size()) < kRhythmGaps) return std::numeric_limits<double>::quiet_NaN();
+  return *std::min_element(b_gaps_.begin(), b_gaps_.end());
+}
+
+bool StampPairer::nextBIsFarther(double ta) const {
+  const double gap = minGapB();
+  if (!(gap > 0)) return false;  // rhythm unknown yet
+  const double newest = b_.back();
+  return newest + kRhythmMargin * gap - ta >= ta - newest;
 }
 
 void StampPairer::match(std::vector<Op>* ops) {
@@ -94,8 +112,9 @@ void StampPairer::match(std::vector<Op>* ops) {
       break;  // wait for B
     }
     // b_ is not empty, so b_.back() is the newest B. A later B could still be
-    // closer while the newest B is before ta.
-    if (b_.back() < ta) break;
+    // closer while the newest B is before ta -- unless the B stream's rhythm
+    // says the next one comes too late to be closer.
+    if (b_.back() < ta && !nextBIsFarther(ta)) break;
     for (int i = 0; i < best; ++i) dropB(ops);
     a_.pop_front();
     b_.pop_front();

@@ -97,6 +97,51 @@ TEST(ApproximateSync, JitteredTumLikeStreamsPairByIndex) {
   EXPECT_EQ(sync.stats().received_a, n);
 }
 
+TEST(ApproximateSync, EarlyDepthIsNotHeldBackOnceTheRhythmIsKnown) {
+  // 30 Hz depth stamped 10 ms before its colour image, each message pushed as
+  // it arrives. Once B's rhythm is known (8 intervals), a colour image pairs at
+  // once: the next depth (23 ms after the colour) cannot be closer than this
+  // one (10 ms before). Before that the pair waits for the next depth.
+  Sync sync;  // slop 0.020
+  for (int k = 0; k < 30; ++k) {
+    const double t = 100.0 + k / 30.0;
+    sync.push_b(t - 0.010, k);
+    if (k > 0 && k <= 8) {  // the previous colour image paired only now
+      auto late = sync.pop();
+      ASSERT_TRUE(late.has_value()) << k;
+      EXPECT_EQ(late->a, k - 1);
+      EXPECT_EQ(late->b, k - 1);
+    }
+    sync.push_a(t, k);
+    auto p = sync.pop();
+    if (k < 8) {
+      EXPECT_FALSE(p.has_value()) << "k " << k << ": rhythm unknown, must wait";
+      continue;
+    }
+    ASSERT_TRUE(p.has_value()) << "k " << k << ": paired without waiting";
+    EXPECT_EQ(p->a, k);
+    EXPECT_EQ(p->b, k);
+  }
+  EXPECT_EQ(sync.stats().paired, 30);
+  EXPECT_EQ(sync.stats().dropped_a + sync.stats().dropped_b, 0);
+
+  // A depth stream faster than its rhythm suggested may still pair a farther
+  // depth, but never one beyond the slop, and pairs stay in time order.
+  Sync jumpy;
+  std::vector<SyncedPair<int, int>> pairs;
+  double tb = 200.0;
+  for (int k = 0; k < 40; ++k) {
+    const double ta = 200.0 + k / 30.0;
+    tb = k < 20 ? ta - 0.012 : tb + 0.017;  // depth doubles its rate halfway
+    jumpy.push_b(tb, k);
+    if (k >= 20) jumpy.push_b(tb += 0.017, 100 + k);
+    jumpy.push_a(ta, k);
+    while (auto p = jumpy.pop()) pairs.push_back(*p);
+  }
+  EXPECT_GE(pairs.size(), 35u);
+  expectTimeOrdered(pairs, 0.020);
+}
+
 TEST(ApproximateSync, ClosestPartnerWinsAndOlderOnesAreDropped) {
   Sync sync;
   sync.push_a(1.000, 1);

@@ -8,7 +8,11 @@
 //     queue drops that queue's OLDEST message (`overflow_*`, also a `dropped_*`).
 //   * The oldest waiting A is paired with the waiting B closest in stamp, if
 //     |t_B - t_A| <= slop (ties: the older B). The pair is final once a B at or
-//     after t_A has arrived (no later B can be closer); until then A waits.
+//     after t_A has arrived (no later B can be closer), or once B's rhythm rules
+//     a closer B out: the next B comes no earlier than the newest B + 0.8 x the
+//     smallest of B's last 8 stamp intervals, and that is no closer to t_A
+//     (so an RGB-D pair whose depth is a few ms early is not held back for the
+//     next depth image, a whole frame later); until then A waits.
 //     Each message is used once; B's older than the paired B are dropped, so
 //     pop() hands out pairs in time order on both streams.
 //   * A message that can no longer be paired is dropped (`dropped_*`): no
@@ -75,7 +79,14 @@ class StampPairer {
   std::size_t waitingB() const { return b_.size(); }
 
  private:
+  static constexpr int kRhythmGaps = 8;         ///< B intervals remembered
+  static constexpr double kRhythmMargin = 0.8;  ///< next B >= newest + 0.8 x smallest interval
+
   bool push(bool is_a, double stamp, std::vector<Op>* ops);
+  /// The smallest of B's last kRhythmGaps stamp intervals; NaN until known.
+  double minGapB() const;
+  /// True when no B still to come can be closer to ta than the newest one.
+  bool nextBIsFarther(double ta) const;
   void match(std::vector<Op>* ops);
   void dropA(std::vector<Op>* ops);
   void dropB(std::vector<Op>* ops);
@@ -83,6 +94,7 @@ class StampPairer {
   SyncParams params_;
   SyncStats stats_;
   std::deque<double> a_, b_;  ///< waiting stamps, ascending
+  std::deque<double> b_gaps_;  ///< B's last stamp intervals [s]
   bool have_a_ = false, have_b_ = false;
 };
 
