@@ -3,8 +3,9 @@
 //   hermes: what the DatasetPlayer publishes (rectified, with camera_info):
 //           stereo: <ns>/left/image_rect, <ns>/right/image_rect (mono8),
 //                   <ns>/left/camera_info, <ns>/right/camera_info
-//           rgbd  : <ns>/rgb/image_rect (mono8), <ns>/depth/image_rect (32FC1 [m]),
-//                   <ns>/rgb/camera_info
+//           rgbd  : <ns>/rgb/image_rect (mono8, as loaded: a TUM fr1/fr2 colour image
+//                   keeps its distortion, which rgb/camera_info's D carries),
+//                   <ns>/depth/image_rect (32FC1 [m]), <ns>/rgb/camera_info
 //   euroc : as the published EuRoC bags: /cam0/image_raw, /cam1/image_raw, the
 //           raw (distorted) mono8 images of the folder, no camera_info
 //   tum   : as the published TUM RGB-D bags: /camera/rgb/image_color (rgb8),
@@ -113,6 +114,8 @@ int main(int argc, char** argv) {
     rosbag::Bag bag(out, rosbag::bagmode::Write);
     sensor_msgs::CameraInfo li = hermes_agent::infoFromIntrinsics(info.K, 0.0, ns + "/camera");
     sensor_msgs::CameraInfo ri = hermes_agent::infoFromIntrinsics(info.K, info.baseline, ns + "/camera_right");
+    if (!stereo && info.rgbd)  // the colour images are published as loaded: with their lens distortion
+      li.D.assign(info.rgbd->dist.begin(), info.rgbd->dist.end());
     for (std::size_t i = 0; i < n; ++i) {
       std_msgs::Header h;
       if (layout == "euroc") {
