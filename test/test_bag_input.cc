@@ -102,7 +102,9 @@ TEST(BagInput, OdometryFromAPublishedLayoutBag) {
 
   // Latency: odometry arrival - arrival of the same image here.
   std::vector<double> latency_ms;
+  std::size_t exact = 0;  // odometry stamps equal to an image's header stamp to the nanosecond
   for (const auto& [stamp, wall] : o.odom_wall) {
+    exact += o.image_wall.count(stamp);
     auto it = o.image_wall.lower_bound(stamp - 1000000);  // stamps round-trip through double
     if (it != o.image_wall.end() && std::llabs(it->first - stamp) <= 1000000)
       latency_ms.push_back(1e3 * (wall - it->second));
@@ -116,6 +118,7 @@ TEST(BagInput, OdometryFromAPublishedLayoutBag) {
   std::printf("uplink_status: %s\n", o.status.c_str());
   EXPECT_EQ(o.image_wall.size(), frames) << "the bag did not reach this node whole";
   EXPECT_GE(tracked, min_tracked) << "too few frames tracked";
+  EXPECT_EQ(exact, o.odom_wall.size()) << "odometry not stamped with its image's stamp";
 
   nlohmann::json j;
   j["data"] = data;

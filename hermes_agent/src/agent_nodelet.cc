@@ -43,6 +43,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -262,8 +263,13 @@ class AgentNodelet : public nodelet::Nodelet {
                         (first ? topic_a_ : topic_b_).c_str(), image.error().c_str());
         return;
       }
-      if (first) stream_->pushA(std::move(*image));
-      else stream_->pushB(std::move(*image));
+      if (first) {
+        exact_stamps_[image->stamp] = m->header.stamp;  // odom carries the image's own stamp
+        while (exact_stamps_.size() > 1000) exact_stamps_.erase(exact_stamps_.begin());
+        stream_->pushA(std::move(*image));
+      } else {
+        stream_->pushB(std::move(*image));
+      }
       logProblems();
     }
     trackReadyFrames();
@@ -281,13 +287,18 @@ class AgentNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mu_);
     for (;;) {
       std::optional<hermes::CameraFrame> frame;
+      ros::Time stamp;
       {
         std::lock_guard<std::mutex> l(stream_mu_);
         frame = stream_->next();
         logProblems();
+        if (!frame) return;
+        // The header stamp exactly (the core's seconds lose nanoseconds); older ones go.
+        auto it = exact_stamps_.find(frame->stamp);
+        stamp = it != exact_stamps_.end() ? it->second : ros::Time(frame->stamp);
+        exact_stamps_.erase(exact_stamps_.begin(), exact_stamps_.upper_bound(frame->stamp));
       }
-      if (!frame) return;
-      track(*frame);
+      track(*frame, stamp);
     }
   }
 
@@ -322,7 +333,7 @@ class AgentNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  void track(const hermes::CameraFrame& frame) {
+  void track(const hermes::CameraFrame& frame, const ros::Time& stamp) {
     if (!ensurePipeline()) return;
     auto r = pipeline_->feed(frame);
     noteSubmitted();
@@ -335,7 +346,7 @@ class AgentNodelet : public nodelet::Nodelet {
     ++tracked_;
     const hermes::SE3 T_W_B = pipeline_->trajectory().back().T_W_B;
     nav_msgs::Odometry odom;
-    odom.header.stamp = ros::Time(frame.stamp);
+    odom.header.stamp = stamp;
     odom.header.frame_id = robot_ + "/odom";
     odom.child_frame_id = robot_ + "/base_link";
     odom.pose.pose = toPose(T_W_B);
@@ -472,6 +483,7 @@ class AgentNodelet : public nodelet::Nodelet {
   std::optional<sensor_msgs::CameraInfo> info_a_, info_b_;
   std::string info_error_;  ///< the last camera_info problem (logged when it changes)
   std::unique_ptr<hermes::agent::CameraStream> stream_;
+  std::map<double, ros::Time> exact_stamps_;  ///< left / colour header stamps by seconds
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
   std::int64_t received_a_ = 0, received_b_ = 0, no_camera_ = 0, malformed_ = 0;
   std::int64_t tracked_ = 0, feed_errors_ = 0;
