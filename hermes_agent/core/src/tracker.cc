@@ -400,6 +400,11 @@ void Tracker::runLocalMapping(TrackResult* r, const std::vector<float>& scales) 
   }
   const SE3 before = keyframes_.back().T_A_C;
   r->mapping = mapper_.process(&keyframes_, &landmarks_, scales);
+  if (r->mapping.ba_ms > 0) {
+    ++mapping_stats_.ba_jobs;
+    mapping_stats_.ba_ms_total += r->mapping.ba_ms;
+    mapping_stats_.ba_ms_max = std::max(mapping_stats_.ba_ms_max, r->mapping.ba_ms);
+  }
   // The newest keyframe is the current frame: carry its correction into the
   // motion model (both poses, so the velocity is kept).
   const SE3 T_W_C = keyframes_.back().T_A_C;

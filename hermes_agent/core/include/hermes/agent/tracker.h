@@ -101,7 +101,7 @@ struct TrackResult {
 /// Counters of the local mapping stage (see the policy above).
 struct MappingStageStats {
   std::int64_t keyframes = 0;   ///< keyframes inserted after the first
-  std::int64_t ba_jobs = 0;     ///< local BAs solved and applied
+  std::int64_t ba_jobs = 0;     ///< local BAs run (parallel: every job applied, solved or not)
   std::int64_t merged = 0;      ///< keyframes whose BA was merged into a later job
   std::int64_t skipped = 0;     ///< keyframes left out of every BA window (mapper behind)
   std::int64_t max_waiting = 0; ///< most keyframes waiting for a BA at once
