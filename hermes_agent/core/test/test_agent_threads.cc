@@ -13,6 +13,7 @@
 #include <map>
 #include <mutex>
 #include <set>
+#include <thread>
 
 #include "hermes/agent/agent_pipeline.h"
 #include "hermes/agent/map_buffer.h"
@@ -277,6 +278,53 @@ TEST(AgentThreads, HeldUplinkMergesWindowsAndShutdownSubmitsThem) {
   auto spool = agent::MapBuffer::open(bp);
   ASSERT_TRUE(spool.ok()) << spool.error();
   EXPECT_EQ(std::int64_t(spool->pendingCount()), jobs);
+}
+
+// The stage itself: synchronous mode runs in the caller's thread; in parallel
+// mode jobs run in order, a full queue folds the newest jobs into its last
+// waiting one, and stop() runs everything queued before the thread ends.
+TEST(StageWorker, OrderMergePolicyAndDrainingStop) {
+  const std::thread::id caller = std::this_thread::get_id();
+  std::vector<std::thread::id> where;
+  agent::StageWorker<int> sync(false, 1, [&](int&) { where.push_back(std::this_thread::get_id()); },
+                               nullptr);
+  sync.push(1);
+  sync.push(2);
+  ASSERT_EQ(where.size(), 2u);
+  EXPECT_EQ(where[0], caller);
+  EXPECT_EQ(sync.stats().run, 2);
+
+  Gate gate;
+  bool timed_out = false;
+  std::vector<std::vector<int>> ran;  // written by the worker, read after stop()
+  {
+    agent::StageWorker<std::vector<int>> w(
+        true, 2,
+        [&](std::vector<int>& job) {
+          if (!gate.isOpen() && !gate.wait()) timed_out = true;
+          ran.push_back(job);
+        },
+        [](std::vector<int>& waiting, std::vector<int>&& incoming) {
+          waiting.insert(waiting.end(), incoming.begin(), incoming.end());
+        });
+    w.push({1});
+    ASSERT_TRUE(gate.waitEntered(1));  // job 1 runs and is held: 2.. queue up
+    for (int i = 2; i <= 6; ++i) w.push({i});
+    const agent::StageStats st = w.stats();
+    EXPECT_EQ(st.pushed, 6);
+    EXPECT_EQ(st.merged, 3);  // 2 and 3 wait; 4, 5, 6 join 3
+    EXPECT_EQ(st.high_water, 2u);
+    EXPECT_EQ(st.run, 0);
+    EXPECT_FALSE(w.idle());
+    gate.open();
+    w.stop();
+    EXPECT_EQ(w.stats().run, 3);
+  }
+  EXPECT_FALSE(timed_out);
+  ASSERT_EQ(ran.size(), 3u);
+  EXPECT_EQ(ran[0], std::vector<int>({1}));
+  EXPECT_EQ(ran[1], std::vector<int>({2}));
+  EXPECT_EQ(ran[2], std::vector<int>({3, 4, 5, 6}));
 }
 
 TEST(AgentThreads, ThreadParamsAreReadAndChecked) {

@@ -107,6 +107,8 @@ class AgentPipeline {
   /// UplinkSender that hands frames to `transport`. Uplink time = frame stamp -
   /// `clock_offset_s` (the offline runner's simulated clock starts at 0 for every
   /// agent). Call once, before the first frame. Errors: spool cannot be opened.
+  /// `transport` runs under the pipeline's uplink lock (on the uplink thread in
+  /// parallel mode): it must not call back into the pipeline.
   Status attachUplink(UplinkSender::Transport transport, double clock_offset_s = 0);
   /// Replaces the stamp-based uplink clock by `clock` (e.g. wall time in a ROS
   /// node, where frame stamps and the network need not advance together).
