@@ -6,6 +6,7 @@
 #include <unordered_map>
 
 #include "hermes/agent/covisibility.h"
+#include "hermes/agent/feature_matching.h"
 
 namespace hermes {
 
@@ -261,6 +262,15 @@ void LocalMapper::fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
       if (id != kInvalidId && !isBad(id)) candidates.push_back(id);
   std::sort(candidates.begin(), candidates.end());
   candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  // Keypoints near a projection come from a grid (a superset of the gate of
+  // the largest octave), then are scanned in index order exactly as a scan of
+  // every keypoint would (same choice, far fewer distance checks).
+  const KeypointGrid grid(kn.keypoints, K_.width, K_.height);
+  float max_scale = 1.f;
+  for (const Keypoint& k : kn.keypoints)
+    max_scale = std::max(max_scale, k.octave < scales.size() ? scales[k.octave] : 1.f);
+  const double gate_px = std::sqrt(5.991 * double(max_scale) * double(max_scale)) * (1 + 1e-9) + 1e-6;
+  std::vector<int> near;
   for (LandmarkId id : candidates) {
     Landmark& l = (*lms)[id];
     if (isBad(id) || l.observations.empty()) continue;
@@ -273,7 +283,10 @@ void LocalMapper::fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
     if (!K_.inImage(uv)) continue;
     int best = params_.max_hamming + 1;
     std::uint32_t best_i = 0;
-    for (std::uint32_t i = 0; i < kn.keypoints.size(); ++i) {
+    near = grid.query(uv.x(), uv.y(), gate_px);
+    std::sort(near.begin(), near.end());
+    for (int ni : near) {
+      const std::uint32_t i = std::uint32_t(ni);
       const Keypoint& k = kn.keypoints[i];
       const float sg = k.octave < scales.size() ? scales[k.octave] : 1.f;
       if ((Vec2(k.u, k.v) - uv).squaredNorm() > 5.991 * sg * sg) continue;

@@ -396,6 +396,8 @@ void Tracker::runLocalMapping(TrackResult* r, const std::vector<float>& scales) 
     scheduleBa();
     r->mapping.total_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    mapping_stats_.structure_ms_total += r->mapping.total_ms;
+    mapping_stats_.structure_ms_max = std::max(mapping_stats_.structure_ms_max, r->mapping.total_ms);
     return;
   }
   const SE3 before = keyframes_.back().T_A_C;

@@ -1,5 +1,6 @@
 // hermes_bench_realtime_core: one agent fed in real time without ROS. A rendered
-// stereo sequence (V1_01 ground truth, EuRoC calibration, procedural scene) is
+// sequence (V1_01 ground truth, procedural scene; stereo with the EuRoC
+// calibration at 20 Hz, or --format tum: RGB-D at 30 Hz) is
 // held in memory and handed to AgentPipeline::feed at the pace of its stamps
 // (frame i arrives at t0 + stamp_i - stamp_0; a feed that returns late delays
 // the next frames, as a camera callback queue would). Run once in synchronous
@@ -10,8 +11,9 @@
 //   stage counters (BA jobs merged / skipped, windows queued / merged).
 // The agent has no uplink: windows are distilled (distill.* as configured,
 // default milp) and encoded, then only counted.
-// Usage: hermes_bench_realtime_core [--start S] [--seconds N] [--mode both|sync|parallel]
-//                                   [--cache DIR] [--json FILE] [--set key=value ...]
+// Usage: hermes_bench_realtime_core [--format euroc|tum] [--rate HZ] [--start S] [--seconds N]
+//                                   [--mode both|sync|parallel] [--cache DIR] [--json FILE]
+//                                   [--set key=value ...]
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -48,8 +50,9 @@ struct Clip {
 };
 
 /// Renders the slice into `dir` once (kept as a cache), then loads it.
-Expected<Clip> loadClip(const std::string& dir, double start_s, double seconds) {
-  if (!fs::exists(dir + "/mav0")) {
+Expected<Clip> loadClip(const std::string& dir, bool tum, double rate_hz, double start_s,
+                        double seconds) {
+  if (!fs::exists(dir + "/done")) {
     const std::string gt_path = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt";
     auto gt = readTumTrajectory(gt_path);
     if (!gt.ok()) return Error{gt.error()};
@@ -67,11 +70,15 @@ Expected<Clip> loadClip(const std::string& dir, double start_s, double seconds) 
     render::SequenceSpec spec;
     spec.start_s = start_s;
     spec.duration_s = seconds;
-    spec.rate_hz = 20;
+    spec.rate_hz = rate_hz;
     spec.seed = 7;
     fs::remove_all(dir);
-    auto written = render::writeEurocSequence(dir, *scene, *gt, cam0, cam1, spec);
+    RgbdCamera rgbd = render::defaultRgbd();
+    rgbd.rate_hz = rate_hz;
+    auto written = tum ? render::writeTumSequence(dir, *scene, *gt, rgbd, spec)
+                       : render::writeEurocSequence(dir, *scene, *gt, cam0, cam1, spec);
     if (!written.ok()) return Error{written.error()};
+    std::ofstream(dir + "/done") << "rendered\n";
   }
   auto ds = Dataset::open(dir);
   if (!ds.ok()) return Error{ds.error()};
@@ -155,7 +162,11 @@ Expected<nlohmann::json> runMode(const Clip& clip, agent::AgentPipelineParams pa
                   {"merged", st.mapping.merged},       {"skipped", st.mapping.skipped},
                   {"max_waiting", st.mapping.max_waiting},
                   {"ba_ms_mean", st.mapping.ba_jobs ? st.mapping.ba_ms_total / st.mapping.ba_jobs : 0.0},
-                  {"ba_ms_max", st.mapping.ba_ms_max}};
+                  {"ba_ms_max", st.mapping.ba_ms_max},
+                  {"structure_ms_mean", st.mapping.keyframes ? st.mapping.structure_ms_total /
+                                                                   double(st.mapping.keyframes)
+                                                             : 0.0},
+                  {"structure_ms_max", st.mapping.structure_ms_max}};
   const agent::WindowCounters w = p.windows();
   j["windows"] = {{"cut", w.windows},          {"sent", w.sent},
                   {"queued", st.windows.pushed}, {"merged_in_queue", st.windows.merged},
@@ -170,8 +181,8 @@ Expected<nlohmann::json> runMode(const Clip& clip, agent::AgentPipelineParams pa
 }  // namespace
 
 int main(int argc, char** argv) {
-  double start_s = 10, seconds = 20;
-  std::string mode = "both", json_out, cache = "/tmp/hermes_bench_realtime_core";
+  double start_s = 10, seconds = 20, rate_hz = 0;
+  std::string format = "euroc", mode = "both", json_out, cache = "/tmp/hermes_bench_realtime_core";
   std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -182,18 +193,26 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--start") start_s = std::stod(next());
+    if (a == "--format") format = next();
+    else if (a == "--rate") rate_hz = std::stod(next());
+    else if (a == "--start") start_s = std::stod(next());
     else if (a == "--seconds") seconds = std::stod(next());
     else if (a == "--mode") mode = next();
     else if (a == "--cache") cache = next();
     else if (a == "--json") json_out = next();
     else if (a == "--set") sets.push_back(next());
     else {
-      std::cerr << "usage: hermes_bench_realtime_core [--start S] [--seconds N] "
+      std::cerr << "usage: hermes_bench_realtime_core [--format euroc|tum] [--rate HZ] "
+                   "[--start S] [--seconds N] "
                    "[--mode both|sync|parallel] [--cache DIR] [--json FILE] [--set key=value ...]\n";
       return a == "--help" ? 0 : 2;
     }
   }
+  if (format != "euroc" && format != "tum") {
+    std::cerr << "--format must be euroc or tum\n";
+    return 2;
+  }
+  if (rate_hz <= 0) rate_hz = format == "tum" ? 30 : 20;
   if (mode != "both" && mode != "sync" && mode != "parallel") {
     std::cerr << "--mode must be both, sync or parallel\n";
     return 2;
@@ -214,15 +233,18 @@ int main(int argc, char** argv) {
     return 2;
   }
   char key[128];
-  std::snprintf(key, sizeof key, "/V1_01_s%g_d%g", start_s, seconds);
-  auto clip = loadClip(cache + key, start_s, seconds);
+  std::snprintf(key, sizeof key, "/V1_01_%s_r%g_s%g_d%g", format.c_str(), rate_hz, start_s,
+                seconds);
+  auto clip = loadClip(cache + key, format == "tum", rate_hz, start_s, seconds);
   if (!clip.ok()) {
     std::cerr << clip.error() << "\n";
     return 1;
   }
   nlohmann::json out;
-  out["sequence"] = std::string("V1_01 rendered, ") + std::to_string(start_s) + " s + " +
-                    std::to_string(seconds) + " s at 20 Hz, stereo 752x480";
+  char what[256];
+  std::snprintf(what, sizeof what, "V1_01 rendered from %g s, %g s at %g Hz, %s", start_s, seconds,
+                rate_hz, format == "tum" ? "RGB-D (TUM layout)" : "stereo 752x480 (EuRoC layout)");
+  out["sequence"] = what;
   out["hardware_threads"] = std::thread::hardware_concurrency();
   for (bool parallel : {false, true}) {
     if ((mode == "sync" && parallel) || (mode == "parallel" && !parallel)) continue;

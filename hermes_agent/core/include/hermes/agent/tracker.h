@@ -105,7 +105,9 @@ struct MappingStageStats {
   std::int64_t merged = 0;      ///< keyframes whose BA was merged into a later job
   std::int64_t skipped = 0;     ///< keyframes left out of every BA window (mapper behind)
   std::int64_t max_waiting = 0; ///< most keyframes waiting for a BA at once
-  double ba_ms_total = 0, ba_ms_max = 0;  ///< solve times on the mapper thread [ms]
+  double ba_ms_total = 0, ba_ms_max = 0;  ///< solve times (on the mapper thread if parallel) [ms]
+  /// Parallel: culling, triangulation and fusion, which stay in feed() [ms].
+  double structure_ms_total = 0, structure_ms_max = 0;
 };
 
 class Tracker {
