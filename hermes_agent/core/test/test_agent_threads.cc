@@ -5,6 +5,7 @@
 // it all. Gates (not clocks) hold the workers: a feed() that waited for them
 // would hang until the gate's timeout, which the tests then report.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -99,7 +100,8 @@ agent::UplinkSender::Transport capture(Captured* c) {
 }
 
 std::string spoolDir(const std::string& name) {
-  const std::string dir = ::testing::TempDir() + "/hermes_agent_threads_spool_" + name;
+  const std::string dir = ::testing::TempDir() + "/hermes_agent_threads_spool_" + name + "_" +
+                          std::to_string(::getpid());
   fs::remove_all(dir);
   return dir;
 }

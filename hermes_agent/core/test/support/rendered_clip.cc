@@ -1,5 +1,7 @@
 #include "rendered_clip.h"
 
+#include <unistd.h>
+
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -32,7 +34,7 @@ Expected<RenderedClip> renderV101Clip(const std::string& name, double start_s, d
   spec.duration_s = duration_s;
   spec.rate_hz = 20;
   spec.seed = 7;
-  const std::string dir = ::testing::TempDir() + "/" + name;
+  const std::string dir = ::testing::TempDir() + "/" + name + "_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
   auto written = render::writeEurocSequence(dir, *scene, *gt, cam0, cam1, spec);
   if (!written.ok()) return Error{written.error()};

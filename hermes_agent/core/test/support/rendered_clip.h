@@ -18,7 +18,8 @@ struct RenderedClip {
 };
 
 /// `duration_s` of V1_01 from `start_s` at 20 Hz, rendered into
-/// TempDir()/`name`. Errors when the shared data or the renderer fail.
+/// TempDir()/`name`_<pid> (ctest runs test cases as parallel processes).
+/// Errors when the shared data or the renderer fail.
 Expected<RenderedClip> renderV101Clip(const std::string& name, double start_s, double duration_s);
 
 }  // namespace hermes::test
