@@ -344,9 +344,18 @@ void LocalMapper::triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>*
     const SE3 T_K_N = T_K_W * T_W_N;
     if (T_K_N.translation().norm() < 1e-3) continue;
     const Mat3 E = hat(T_K_N.translation()) * T_K_N.rotation();  // x_K^T E x_N = 0
+    // Free keypoints of kk with their normalised coordinates and epipolar gates,
+    // computed once per keyframe pair instead of once per keypoint pair.
     std::vector<std::uint32_t> free_k;
-    for (std::uint32_t j = 0; j < kk.keypoints.size(); ++j)
-      if (kk.keypoint_landmark[j] == kInvalidId) free_k.push_back(j);
+    std::vector<Vec3> free_x;
+    std::vector<double> free_gate;
+    for (std::uint32_t j = 0; j < kk.keypoints.size(); ++j) {
+      if (kk.keypoint_landmark[j] != kInvalidId) continue;
+      const Keypoint& b = kk.keypoints[j];
+      free_k.push_back(j);
+      free_x.emplace_back((b.u - K_.cx) / K_.fx, (b.v - K_.cy) / K_.fy, 1);
+      free_gate.push_back(2.0 * 1.96 * sigma(b));
+    }
     for (std::uint32_t i = 0; i < kn.keypoints.size(); ++i) {
       if (kn.keypoint_landmark[i] != kInvalidId) continue;
       const Keypoint& a = kn.keypoints[i];
@@ -355,12 +364,11 @@ void LocalMapper::triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>*
       const double line_norm = line.head<2>().norm();
       int best = 257, second = 257;
       std::uint32_t best_j = 0;
-      for (std::uint32_t j : free_k) {
+      for (std::size_t f = 0; f < free_k.size(); ++f) {
+        const std::uint32_t j = free_k[f];
         if (kk.keypoint_landmark[j] != kInvalidId) continue;
-        const Keypoint& b = kk.keypoints[j];
-        const Vec3 xk((b.u - K_.cx) / K_.fx, (b.v - K_.cy) / K_.fy, 1);
         // Epipolar distance in pixels (normalised distance · fx).
-        if (std::abs(xk.dot(line)) / line_norm * K_.fx > 2.0 * 1.96 * sigma(b)) continue;
+        if (std::abs(free_x[f].dot(line)) / line_norm * K_.fx > free_gate[f]) continue;
         const int d = hammingDistance(kn.descriptors[i], kk.descriptors[j]);
         if (d < best) {
           second = best;
