@@ -50,6 +50,57 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
   // Agent identity in the window headers: a stable id from the agent's name.
   agent_id_ = uuidFromSeed(std::hash<std::string>{}(name));
   setWindowIdentity(tracker_, agent_id_, session_);
+  window_s_ = params.distill.window_s;
+  startWorkers(params.threads.parallel);
+}
+
+AgentPipeline::~AgentPipeline() {
+  // Queued windows are distilled and submitted (spooled), then the threads end;
+  // the tracker joins its mapper thread itself.
+  if (window_worker_) window_worker_->stop();
+}
+
+void AgentPipeline::startWorkers(bool parallel) {
+  tracker_.setParallelMapping(parallel, mapper_hook_);
+  if (!parallel) {
+    window_worker_.reset();
+    return;
+  }
+  window_worker_ = std::make_unique<StageWorker<WindowJob>>(
+      true, static_cast<std::size_t>(params_.threads.window_queue),
+      [this](WindowJob& job) { runWindowJob(job); },
+      [](WindowJob& waiting, WindowJob&& incoming) {
+        // Never dropped: the newer window joins the waiting one (one submap for
+        // both periods); a retry folds into anything (the carry is merged anyway).
+        if (incoming.window) {
+          if (!waiting.window) {
+            waiting.window = std::move(incoming.window);
+          } else {
+            auto merged = mergeWindows(std::move(*waiting.window), *incoming.window);
+            // Same camera table within one agent: merging cannot fail; if it
+            // did, the newer window is kept (the older one is counted failed).
+            waiting.window = merged.ok() ? std::move(*merged) : std::move(*incoming.window);
+            waiting.periods += incoming.periods;
+          }
+        }
+        waiting.motion = incoming.motion;
+        waiting.stamp = incoming.stamp;
+        waiting.link_stamp = incoming.link_stamp;
+      });
+}
+
+Status AgentPipeline::setParallel(bool parallel) {
+  if (frames_ > 0) return Error{"agent " + name_ + ": choose the threading before the first frame"};
+  params_.threads.parallel = parallel;
+  startWorkers(parallel);
+  return Status::Ok();
+}
+
+Status AgentPipeline::setMapperHook(std::function<void()> before_solve) {
+  if (frames_ > 0) return Error{"agent " + name_ + ": set the mapper hook before the first frame"};
+  mapper_hook_ = std::move(before_solve);
+  tracker_.setParallelMapping(params_.threads.parallel, mapper_hook_);
+  return Status::Ok();
 }
 
 Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clock_offset_s) {
@@ -60,7 +111,10 @@ Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clo
   if (!sender.ok()) return Error{"agent " + name_ + ": uplink: " + sender.error()};
   auto session = sender->buffer().newSession();
   if (!session.ok()) return Error{"agent " + name_ + ": uplink: " + session.error()};
-  uplink_ = std::make_unique<UplinkSender>(std::move(*sender));
+  {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    uplink_ = std::make_unique<UplinkSender>(std::move(*sender));
+  }
   session_ = *session;
   clock_offset_ = clock_offset_s;
   setWindowIdentity(tracker_, agent_id_, session_);
@@ -68,12 +122,14 @@ Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clo
 }
 
 Status AgentPipeline::onAck(std::uint32_t session, std::uint64_t seq, double now) {
+  std::lock_guard<std::mutex> lock(uplink_mu_);
   if (!uplink_) return Error{"agent " + name_ + ": acknowledgement without an uplink"};
   if (last_window_ && *last_window_ == std::make_pair(session, seq)) last_window_acked_ = true;
   return uplink_->onAck(session, seq, now);
 }
 
 void AgentPipeline::pollUplink(double now) {
+  std::lock_guard<std::mutex> lock(uplink_mu_);
   if (uplink_) uplink_->poll(now);
 }
 
@@ -99,7 +155,10 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
     ++lost_;
   }
   const auto t1 = std::chrono::steady_clock::now();
-  windowStep(frame.stamp);
+  if (window_worker_)
+    queueWindowStep(frame.stamp, frame.stamp);
+  else
+    windowStep(frame.stamp);
   timings_.add("window", msSince(t1));
   timings_.add("agent_total", msSince(t0));
   return result;
@@ -144,6 +203,14 @@ void AgentPipeline::setOdometryCorruption(const OdometryCorruptionParams& params
 }
 
 void AgentPipeline::retryCarriedWindow(double now) {
+  if (window_worker_) {
+    if (!hasCarriedWindow()) return;
+    WindowJob job;
+    job.stamp = job.link_stamp = now + clock_offset_;
+    ++window_retries_;
+    window_worker_->push(std::move(job));
+    return;
+  }
   if (!windows_.carry) return;
   // The uplink clock is the stamp clock shifted by the offset (or its own clock).
   windowStep(now + clock_offset_, /*retry_carry=*/true);
@@ -151,6 +218,13 @@ void AgentPipeline::retryCarriedWindow(double now) {
 
 void AgentPipeline::flushWindow() {
   if (frames_ == 0) return;
+  if (window_worker_) {
+    tracker_.finishMapping();  // every keyframe adjusted: the whole map can go
+    window_worker_->waitIdle();
+    queueWindowStep(last_stamp_ + params_.tracker.window.period_s + 1e-6, last_stamp_);
+    window_worker_->waitIdle();
+    return;
+  }
   // A stamp one window period after the last frame makes the open window due.
   windowStep(last_stamp_ + params_.tracker.window.period_s + 1e-6);
 }
@@ -161,10 +235,143 @@ AgentMetrics AgentPipeline::metrics() const {
   m.lost_rate = lostRate();
   m.keyframes = static_cast<std::int64_t>(tracker_.keyframes().size());
   m.landmarks = static_cast<std::int64_t>(tracker_.landmarks().size());
-  m.bytes = windows_.bytes;
-  m.submaps_sent = windows_.sent;
-  m.submaps_deferred = windows_.deferred + windows_.refused;
+  const WindowCounters w = windows();
+  m.bytes = w.bytes;
+  m.submaps_sent = w.sent;
+  m.submaps_deferred = w.deferred + w.refused;
   return m;
+}
+
+WindowCounters AgentPipeline::windows() const {
+  if (!window_worker_) return windows_;
+  std::lock_guard<std::mutex> lock(stats_mu_);
+  return windows_;
+}
+
+bool AgentPipeline::hasCarriedWindow() const {
+  if (!window_worker_) return windows_.carry.has_value();
+  std::lock_guard<std::mutex> lock(stats_mu_);
+  return carry_pending_;
+}
+
+TimingStats AgentPipeline::timings() const {
+  TimingStats t = timings_;
+  if (window_worker_) {
+    std::lock_guard<std::mutex> lock(stats_mu_);
+    t.merge(stage_timings_);
+  }
+  return t;
+}
+
+AgentThreadStats AgentPipeline::threadStats() const {
+  AgentThreadStats s;
+  s.parallel = window_worker_ != nullptr;
+  s.frames_fed = frames_;
+  s.frames_tracked = frames_ - lost_;
+  s.mapping = tracker_.mappingStats();
+  if (window_worker_) s.windows = window_worker_->stats();
+  s.window_retries = window_retries_;
+  return s;
+}
+
+void AgentPipeline::queueWindowStep(double stamp, double link_stamp) {
+  std::optional<Submap> window = tracker_.takeWindowIfDue(stamp);
+  WindowJob job;
+  job.stamp = stamp;
+  job.link_stamp = link_stamp;
+  if (window) {
+    job.window = std::move(window);
+    job.motion = tracker_.motionHint();
+  } else {
+    // No new window (the robot stands still): a carried one is retried once a
+    // period, as runWindowStep does (the published state may be a job old).
+    std::lock_guard<std::mutex> lock(stats_mu_);
+    if (!carry_pending_ || stamp - carry_stamp_ < window_s_) return;
+    carry_stamp_ = stamp;  // one retry per period, even before the job ran
+    ++window_retries_;
+  }
+  window_worker_->push(std::move(job));
+}
+
+void AgentPipeline::runWindowJob(WindowJob& job) {
+  // Plan with a copy of the monitor and the backlog taken now: the uplink lock
+  // is held only to read them and to submit, never while distilling.
+  BandwidthMonitor monitor = monitor_;
+  WindowSink sink;
+  double now = 0;
+  bool have_uplink = false;
+  {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    now = uplink_clock_ ? uplink_clock_() : job.link_stamp - clock_offset_;
+    if (uplink_) {
+      have_uplink = true;
+      monitor = uplink_->monitor();
+      sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
+    }
+  }
+  sink.link_now = now;
+  sink.loop_closures = loop_closures_.load();
+  sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    if (last_window_) uplink_->monitor().onWindowDelivered(last_window_acked_);
+    const auto key = std::make_pair(submap.header.session, submap.header.seq);
+    Status s = uplink_->submit(key.first, key.second, std::move(bytes), now);
+    if (s) {
+      last_window_ = key;
+      last_window_acked_ = false;
+    }
+    return s;
+  };
+  const WindowSink* out = have_uplink ? &sink : nullptr;
+  WindowCounters& c = stage_windows_;
+  TimingStats t;
+  if (!job.window) {
+    if (c.carry) {
+      Submap carried = std::move(*c.carry);
+      c.carry.reset();
+      distilAndSubmit(std::move(carried), c.carry_periods + 1, job.motion, *distiller_, monitor,
+                      job.stamp, &c, &t, out);
+    }
+  } else {  // as runWindowStep: the carried window joins the new one
+    c.windows += job.periods;
+    int periods = job.periods;
+    Submap window = std::move(*job.window);
+    if (c.carry) {
+      auto merged = mergeWindows(std::move(*c.carry), window);
+      c.carry.reset();
+      if (merged.ok()) {
+        window = std::move(*merged);
+        ++c.carried;
+        periods += c.carry_periods;
+      } else {
+        ++c.failed;
+      }
+      c.carry_dropped_keyframes +=
+          static_cast<std::int64_t>(keepNewestKeyframes(&window, kMaxCarryKeyframes));
+    }
+    distilAndSubmit(std::move(window), periods, job.motion, *distiller_, monitor, job.stamp, &c,
+                    &t, out);
+  }
+  {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    if (uplink_) uplink_->poll(now);
+  }
+  publishWindowCounters(t);
+}
+
+void AgentPipeline::publishWindowCounters(const TimingStats& job_timings) {
+  // Counters without the carried / held maps (they stay with the uplink thread).
+  std::optional<Submap> carry, held;
+  carry.swap(stage_windows_.carry);
+  held.swap(stage_windows_.held);
+  WindowCounters copy = stage_windows_;
+  carry.swap(stage_windows_.carry);
+  held.swap(stage_windows_.held);
+  std::lock_guard<std::mutex> lock(stats_mu_);
+  windows_ = std::move(copy);
+  stage_timings_.merge(job_timings);
+  carry_pending_ = stage_windows_.carry.has_value();
+  if (carry_pending_) carry_stamp_ = stage_windows_.carry_stamp;
 }
 
 }  // namespace hermes::agent

@@ -6,6 +6,7 @@
 #include <unordered_map>
 
 #include "hermes/agent/covisibility.h"
+#include "hermes/agent/feature_matching.h"
 
 namespace hermes {
 
@@ -99,17 +100,20 @@ void LocalMapper::cull(std::vector<Keyframe>* kfs, Landmark* l) {
 LocalMappingStats LocalMapper::process(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
                                        const std::vector<float>& scales) {
   const auto t0 = std::chrono::steady_clock::now();
-  LocalMappingStats st = cullTriangulateFuseAdjust(kfs, lms, scales);
+  LocalMappingStats st;
+  processStructure(kfs, lms, scales, &st);
+  if (std::optional<LocalBaJob> job = cutBa(*kfs, *lms, scales)) {
+    solveLocalBa(&*job);
+    applyBa(*job, kfs, lms, &st);
+  }
   st.total_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return st;
 }
 
-LocalMappingStats LocalMapper::cullTriangulateFuseAdjust(std::vector<Keyframe>* kfs,
-                                                         std::vector<Landmark>* lms,
-                                                         const std::vector<float>& scales) {
-  LocalMappingStats st;
-  if (kfs->empty()) return st;
+void LocalMapper::processStructure(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
+                                   const std::vector<float>& scales, LocalMappingStats* st) {
+  if (kfs->empty()) return;
   const KeyframeId newest = kfs->back().id;
 
   // 1. Culling of young landmarks that did not prove themselves.
@@ -122,32 +126,43 @@ LocalMappingStats LocalMapper::cullTriangulateFuseAdjust(std::vector<Keyframe>* 
     const bool rarely = visible_[id] >= 5 && found_[id] < params_.min_found_ratio * visible_[id];
     if (few || rarely) {
       cull(kfs, &l);
-      ++st.culled;
+      ++st->culled;
     }
   }
-  triangulate(kfs, lms, scales, &st);
-  fuse(kfs, lms, scales, &st);
-  if (!params_.enable_ba || kfs->size() < 2) return st;
+  triangulate(kfs, lms, scales, st);
+  fuse(kfs, lms, scales, st);
+}
+
+std::optional<LocalBaJob> LocalMapper::cutBa(const std::vector<Keyframe>& kfs,
+                                             const std::vector<Landmark>& lms,
+                                             const std::vector<float>& scales) const {
+  if (!params_.enable_ba || kfs.size() < 2) return std::nullopt;
+  LocalBaJob job;
+  job.newest = kfs.back().id;
+  job.T_W_newest = kfs.back().T_A_C;
+  job.keyframes = kfs.size();
+  job.landmarks = lms.size();
+  job.params = params_.ba;
+  LocalMappingStats& st = job.stats;
 
   // 2. Window: newest ba_window keyframes free, covisible older ones fixed.
   const std::size_t first_free =
-      kfs->size() > std::size_t(params_.ba_window) ? kfs->size() - params_.ba_window : 0;
+      kfs.size() > std::size_t(params_.ba_window) ? kfs.size() - params_.ba_window : 0;
   std::unordered_map<KeyframeId, int> pose_index;
-  BaProblem pb;
+  BaProblem& pb = job.problem;
   pb.K = K_;
   pb.baseline = baseline_;
-  std::vector<KeyframeId> pose_kf;
   auto addPose = [&](KeyframeId k, bool fixed) {
     if (pose_index.count(k)) return;
     pose_index[k] = int(pb.T_C_W.size());
-    pb.T_C_W.push_back((*kfs)[k].T_A_C.inverse());
+    pb.T_C_W.push_back(kfs[k].T_A_C.inverse());
     pb.pose_fixed.push_back(fixed);
-    pose_kf.push_back(k);
+    job.pose_kf.push_back(k);
   };
-  for (std::size_t k = first_free; k < kfs->size(); ++k) addPose(k, k == 0);
+  for (std::size_t k = first_free; k < kfs.size(); ++k) addPose(k, k == 0);
   std::unordered_map<KeyframeId, int> fixed_votes;
-  for (std::size_t k = first_free; k < kfs->size(); ++k)
-    for (const auto& [other, n] : covisibleKeyframes(*kfs, *lms, k, params_.min_shared))
+  for (std::size_t k = first_free; k < kfs.size(); ++k)
+    for (const auto& [other, n] : covisibleKeyframes(kfs, lms, k, params_.min_shared))
       if (other < first_free) fixed_votes[other] += n;
   std::vector<std::pair<int, KeyframeId>> fixed;
   for (const auto& [k, n] : fixed_votes) fixed.emplace_back(n, k);
@@ -158,23 +173,20 @@ LocalMappingStats LocalMapper::cullTriangulateFuseAdjust(std::vector<Keyframe>* 
 
   // Landmarks seen by free keyframes, with all their observations in window poses.
   std::unordered_map<LandmarkId, int> point_index;
-  std::vector<LandmarkId> point_lm;
-  struct Ref { LandmarkId lm; std::size_t obs; };
-  std::vector<Ref> refs;
-  for (std::size_t k = first_free; k < kfs->size(); ++k)
-    for (LandmarkId id : (*kfs)[k].keypoint_landmark) {
+  for (std::size_t k = first_free; k < kfs.size(); ++k)
+    for (LandmarkId id : kfs[k].keypoint_landmark) {
       if (id == kInvalidId || point_index.count(id)) continue;
       point_index[id] = int(pb.p_W.size());
-      pb.p_W.push_back((*lms)[id].p_A);
-      point_lm.push_back(id);
+      pb.p_W.push_back(lms[id].p_A);
+      job.point_lm.push_back(id);
     }
-  for (std::size_t j = 0; j < point_lm.size(); ++j) {
-    const Landmark& l = (*lms)[point_lm[j]];
+  for (std::size_t j = 0; j < job.point_lm.size(); ++j) {
+    const Landmark& l = lms[job.point_lm[j]];
     for (std::size_t oi = 0; oi < l.observations.size(); ++oi) {
       const Observation& o = l.observations[oi];
       auto it = pose_index.find(o.keyframe);
       if (it == pose_index.end()) continue;
-      const Keypoint& kp = (*kfs)[o.keyframe].keypoints[o.keypoint];
+      const Keypoint& kp = kfs[o.keyframe].keypoints[o.keypoint];
       BaObservation b;
       b.pose = it->second;
       b.point = int(j);
@@ -182,7 +194,7 @@ LocalMappingStats LocalMapper::cullTriangulateFuseAdjust(std::vector<Keyframe>* 
       b.sigma_px = kp.octave < scales.size() ? scales[kp.octave] : 1.0;
       if (kp.depth > 0) b.u_right = std::max(0.0, kp.u - K_.fx * baseline_ / kp.depth);
       pb.observations.push_back(b);
-      refs.push_back({point_lm[j], oi});
+      job.refs.push_back({job.point_lm[j], o.keyframe, o.keypoint});
     }
   }
   for (bool f : pb.pose_fixed) st.fixed_keyframes += f;
@@ -190,22 +202,54 @@ LocalMappingStats LocalMapper::cullTriangulateFuseAdjust(std::vector<Keyframe>* 
   st.points = int(pb.p_W.size());
   st.observations = int(pb.observations.size());
   for (const BaObservation& o : pb.observations) st.residuals += o.u_right >= 0 ? 3 : 2;
-  auto res = solveBundleAdjustment(&pb, params_.ba);
-  if (!res.ok()) return st;  // degenerate window: keep the tracked estimates
-  st.ba_ms = res->time_ms;
-  st.ba_iterations = res->iterations;
-  for (std::size_t i = 0; i < pose_kf.size(); ++i)
-    if (!pb.pose_fixed[i]) (*kfs)[pose_kf[i]].T_A_C = pb.T_C_W[i].inverse();
-  for (std::size_t j = 0; j < point_lm.size(); ++j) (*lms)[point_lm[j]].p_A = pb.p_W[j];
+  return job;
+}
+
+void solveLocalBa(LocalBaJob* job) {
+  if (job->before_solve) job->before_solve();
+  auto res = solveBundleAdjustment(&job->problem, job->params);
+  if (!res.ok()) return;  // degenerate window: the map keeps the tracked estimates
+  job->stats.ba_ms = res->time_ms;
+  job->stats.ba_iterations = res->iterations;
+  job->summary = std::move(*res);
+}
+
+void LocalMapper::applyBa(const LocalBaJob& job, std::vector<Keyframe>* kfs,
+                          std::vector<Landmark>* lms, LocalMappingStats* st) {
+  st->free_keyframes = job.stats.free_keyframes;
+  st->fixed_keyframes = job.stats.fixed_keyframes;
+  st->points = job.stats.points;
+  st->observations = job.stats.observations;
+  st->residuals = job.stats.residuals;
+  if (!job.summary) return;
+  st->ba_ms = job.stats.ba_ms;
+  st->ba_iterations = job.stats.ba_iterations;
+  const BaProblem& pb = job.problem;
+  for (std::size_t i = 0; i < job.pose_kf.size(); ++i)
+    if (!pb.pose_fixed[i]) (*kfs)[job.pose_kf[i]].T_A_C = pb.T_C_W[i].inverse();
+  for (std::size_t j = 0; j < job.point_lm.size(); ++j)
+    if (!isBad(job.point_lm[j])) (*lms)[job.point_lm[j]].p_A = pb.p_W[j];
   // 3. Outlier observations leave the map (highest index first per landmark).
-  for (std::size_t k = refs.size(); k-- > 0;) {
-    if (!res->outlier[k]) continue;
-    Landmark& l = (*lms)[refs[k].lm];
-    removeObservation(kfs, &l, refs[k].obs);
-    ++st.outliers_removed;
+  const std::vector<bool>& outlier = job.summary->outlier;
+  for (std::size_t k = job.refs.size(); k-- > 0;) {
+    if (!outlier[k]) continue;
+    const LocalBaJob::Ref& ref = job.refs[k];
+    Landmark& l = (*lms)[ref.lm];
+    auto it = std::find_if(l.observations.begin(), l.observations.end(), [&](const Observation& o) {
+      return o.keyframe == ref.keyframe && o.keypoint == ref.keypoint;
+    });
+    if (it == l.observations.end()) continue;  // fused or culled since the cut
+    removeObservation(kfs, &l, std::size_t(it - l.observations.begin()));
+    ++st->outliers_removed;
     if (l.observations.empty() && l.id < bad_.size()) bad_[l.id] = true;
   }
-  return st;
+  // Keyframes and landmarks created after the cut follow the newest keyframe.
+  if (job.keyframes >= kfs->size() && job.landmarks >= lms->size()) return;
+  const SE3 correction = (*kfs)[job.newest].T_A_C * job.T_W_newest.inverse();  // W <- W
+  for (std::size_t k = job.keyframes; k < kfs->size(); ++k)
+    (*kfs)[k].T_A_C = correction * (*kfs)[k].T_A_C;
+  for (std::size_t id = job.landmarks; id < lms->size(); ++id)
+    if (!isBad(id)) (*lms)[id].p_A = correction * (*lms)[id].p_A;
 }
 
 void LocalMapper::fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
@@ -218,6 +262,15 @@ void LocalMapper::fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
       if (id != kInvalidId && !isBad(id)) candidates.push_back(id);
   std::sort(candidates.begin(), candidates.end());
   candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  // Keypoints near a projection come from a grid (a superset of the gate of
+  // the largest octave), then are scanned in index order exactly as a scan of
+  // every keypoint would (same choice, far fewer distance checks).
+  const KeypointGrid grid(kn.keypoints, K_.width, K_.height);
+  float max_scale = 1.f;
+  for (const Keypoint& k : kn.keypoints)
+    max_scale = std::max(max_scale, k.octave < scales.size() ? scales[k.octave] : 1.f);
+  const double gate_px = std::sqrt(5.991 * double(max_scale) * double(max_scale)) * (1 + 1e-9) + 1e-6;
+  std::vector<int> near;
   for (LandmarkId id : candidates) {
     Landmark& l = (*lms)[id];
     if (isBad(id) || l.observations.empty()) continue;
@@ -230,7 +283,10 @@ void LocalMapper::fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,
     if (!K_.inImage(uv)) continue;
     int best = params_.max_hamming + 1;
     std::uint32_t best_i = 0;
-    for (std::uint32_t i = 0; i < kn.keypoints.size(); ++i) {
+    near = grid.query(uv.x(), uv.y(), gate_px);
+    std::sort(near.begin(), near.end());
+    for (int ni : near) {
+      const std::uint32_t i = std::uint32_t(ni);
       const Keypoint& k = kn.keypoints[i];
       const float sg = k.octave < scales.size() ? scales[k.octave] : 1.f;
       if ((Vec2(k.u, k.v) - uv).squaredNorm() > 5.991 * sg * sg) continue;
@@ -288,9 +344,18 @@ void LocalMapper::triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>*
     const SE3 T_K_N = T_K_W * T_W_N;
     if (T_K_N.translation().norm() < 1e-3) continue;
     const Mat3 E = hat(T_K_N.translation()) * T_K_N.rotation();  // x_K^T E x_N = 0
+    // Free keypoints of kk with their normalised coordinates and epipolar gates,
+    // computed once per keyframe pair instead of once per keypoint pair.
     std::vector<std::uint32_t> free_k;
-    for (std::uint32_t j = 0; j < kk.keypoints.size(); ++j)
-      if (kk.keypoint_landmark[j] == kInvalidId) free_k.push_back(j);
+    std::vector<Vec3> free_x;
+    std::vector<double> free_gate;
+    for (std::uint32_t j = 0; j < kk.keypoints.size(); ++j) {
+      if (kk.keypoint_landmark[j] != kInvalidId) continue;
+      const Keypoint& b = kk.keypoints[j];
+      free_k.push_back(j);
+      free_x.emplace_back((b.u - K_.cx) / K_.fx, (b.v - K_.cy) / K_.fy, 1);
+      free_gate.push_back(2.0 * 1.96 * sigma(b));
+    }
     for (std::uint32_t i = 0; i < kn.keypoints.size(); ++i) {
       if (kn.keypoint_landmark[i] != kInvalidId) continue;
       const Keypoint& a = kn.keypoints[i];
@@ -299,12 +364,11 @@ void LocalMapper::triangulate(std::vector<Keyframe>* kfs, std::vector<Landmark>*
       const double line_norm = line.head<2>().norm();
       int best = 257, second = 257;
       std::uint32_t best_j = 0;
-      for (std::uint32_t j : free_k) {
+      for (std::size_t f = 0; f < free_k.size(); ++f) {
+        const std::uint32_t j = free_k[f];
         if (kk.keypoint_landmark[j] != kInvalidId) continue;
-        const Keypoint& b = kk.keypoints[j];
-        const Vec3 xk((b.u - K_.cx) / K_.fx, (b.v - K_.cy) / K_.fy, 1);
         // Epipolar distance in pixels (normalised distance · fx).
-        if (std::abs(xk.dot(line)) / line_norm * K_.fx > 2.0 * 1.96 * sigma(b)) continue;
+        if (std::abs(free_x[f].dot(line)) / line_norm * K_.fx > free_gate[f]) continue;
         const int d = hammingDistance(kn.descriptors[i], kk.descriptors[j]);
         if (d < best) {
           second = best;

@@ -6,12 +6,14 @@ Status AgentPipelineParams::read(const Config& config) {
   if (Status s = tracker.read(config); !s) return s;
   if (Status s = distill.read(config); !s) return s;
   if (Status s = uplink.read(config); !s) return s;
+  if (Status s = threads.read(config); !s) return s;
   return validate();
 }
 
 Status AgentPipelineParams::validate() const {
   if (Status s = tracker.validate(); !s) return s;
   if (Status s = distill.validate(); !s) return s;
+  if (Status s = threads.validate(); !s) return s;
   return uplink.validate();
 }
 
@@ -19,6 +21,7 @@ void AgentPipelineParams::write(ConfigWriter* out) const {
   tracker.write(out);
   distill.write(out);
   uplink.write(*out);
+  threads.write(out);
 }
 
 Status RunParams::read(const Config& config) {

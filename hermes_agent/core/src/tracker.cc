@@ -1,6 +1,7 @@
 #include "hermes/agent/tracker.h"
 
 #include <algorithm>
+#include <chrono>
 #include <future>
 #include <set>
 
@@ -69,6 +70,91 @@ Tracker::Tracker(const TrackerParams& params, const PinholeIntrinsics& K, double
   Status s = params_.validate();
   HERMES_CHECK(s.ok(), s.error());
   HERMES_CHECK(K.fx > 0 && K.fy > 0 && K.width > 0 && K.height > 0, "tracker: bad intrinsics");
+}
+
+Tracker::~Tracker() {
+  if (ba_worker_) ba_worker_->stop();  // the running solve ends; its result is dropped
+}
+
+void Tracker::setParallelMapping(bool parallel, std::function<void()> before_solve) {
+  HERMES_CHECK(keyframes_.empty(), "tracker: set the mapping mode before the first frame");
+  before_solve_ = std::move(before_solve);
+  if (!parallel) {
+    ba_worker_.reset();
+    return;
+  }
+  // One job at a time (capacity 1, never full: scheduleBa pushes only when the
+  // previous job was applied); keyframes arriving meanwhile wait in
+  // waiting_keyframes_ and join the next job.
+  ba_worker_ = std::make_unique<agent::StageWorker<LocalBaJob>>(
+      true, 1,
+      [this](LocalBaJob& job) {
+        solveLocalBa(&job);
+        std::lock_guard<std::mutex> l(done_mu_);
+        done_ = std::move(job);
+      },
+      nullptr);
+}
+
+std::size_t Tracker::mappedKeyframes() const {
+  return ba_worker_ ? std::min(mapped_keyframes_, keyframes_.size()) : keyframes_.size();
+}
+
+void Tracker::pollMapping() {
+  if (!ba_worker_) return;
+  if (ba_in_flight_) {
+    std::optional<LocalBaJob> job;
+    {
+      std::lock_guard<std::mutex> l(done_mu_);
+      job.swap(done_);
+    }
+    if (job) {
+      applyFinishedBa(*job);
+      ba_in_flight_ = false;
+    }
+  }
+  scheduleBa();
+}
+
+void Tracker::scheduleBa() {
+  if (ba_in_flight_ || waiting_keyframes_ == 0) return;
+  std::optional<LocalBaJob> job = mapper_.cutBa(keyframes_, landmarks_, ba_scales_);
+  const int waiting = waiting_keyframes_;
+  waiting_keyframes_ = 0;
+  if (!job) {  // BA off or too few keyframes: nothing to wait for
+    mapped_keyframes_ = keyframes_.size();
+    return;
+  }
+  // The job frees the newest ba_window keyframes: older waiting ones are skipped.
+  const int covered = std::min(waiting, mapper_.params().ba_window);
+  mapping_stats_.merged += covered - 1;
+  mapping_stats_.skipped += waiting - covered;
+  job->before_solve = before_solve_;
+  ba_in_flight_ = true;
+  ba_worker_->push(std::move(*job));
+}
+
+void Tracker::applyFinishedBa(const LocalBaJob& job) {
+  LocalMappingStats st;
+  mapper_.applyBa(job, &keyframes_, &landmarks_, &st);
+  ++mapping_stats_.ba_jobs;
+  mapping_stats_.ba_ms_total += st.ba_ms;
+  mapping_stats_.ba_ms_max = std::max(mapping_stats_.ba_ms_max, st.ba_ms);
+  mapped_keyframes_ = std::max(mapped_keyframes_, std::size_t(job.newest) + 1);
+  if (!job.summary) return;
+  // The motion model follows the newest adjusted keyframe, like the keyframes
+  // and landmarks created after the cut (applyBa).
+  const SE3 correction = keyframes_[job.newest].T_A_C * job.T_W_newest.inverse();  // W <- W
+  T_C_W_last_ = T_C_W_last_ * correction.inverse();
+  T_C_W_prev_ = T_C_W_prev_ * correction.inverse();
+}
+
+void Tracker::finishMapping() {
+  if (!ba_worker_) return;
+  while (ba_in_flight_ || waiting_keyframes_ > 0) {
+    ba_worker_->waitIdle();
+    pollMapping();
+  }
 }
 
 Status Tracker::computeFeatures(const CameraFrame& f, FeatureSet* out) const {
@@ -178,9 +264,10 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   FeatureSet fs;
   Status s = computeFeatures(frame, &fs);
   if (!s) return Error{s.error()};
+  pollMapping();  // parallel mapping: a finished BA enters the map here
   TrackResult r;
   if (status_ == TrackingStatus::kNotInitialised) {
-    initialise(frame, fs, &r);
+    if (initialise(frame, fs, &r)) mapped_keyframes_ = keyframes_.size();
     return r;
   }
 
@@ -298,8 +385,28 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
 }
 
 void Tracker::runLocalMapping(TrackResult* r, const std::vector<float>& scales) {
+  ++mapping_stats_.keyframes;
+  if (ba_worker_) {  // structure now, the BA on the mapper thread
+    const auto t0 = std::chrono::steady_clock::now();
+    mapper_.processStructure(&keyframes_, &landmarks_, scales, &r->mapping);
+    ba_scales_ = scales;  // the same pyramid for every frame
+    ++waiting_keyframes_;
+    mapping_stats_.max_waiting =
+        std::max<std::int64_t>(mapping_stats_.max_waiting, waiting_keyframes_);
+    scheduleBa();
+    r->mapping.total_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    mapping_stats_.structure_ms_total += r->mapping.total_ms;
+    mapping_stats_.structure_ms_max = std::max(mapping_stats_.structure_ms_max, r->mapping.total_ms);
+    return;
+  }
   const SE3 before = keyframes_.back().T_A_C;
   r->mapping = mapper_.process(&keyframes_, &landmarks_, scales);
+  if (r->mapping.ba_ms > 0) {
+    ++mapping_stats_.ba_jobs;
+    mapping_stats_.ba_ms_total += r->mapping.ba_ms;
+    mapping_stats_.ba_ms_max = std::max(mapping_stats_.ba_ms_max, r->mapping.ba_ms);
+  }
   // The newest keyframe is the current frame: carry its correction into the
   // motion model (both poses, so the velocity is kept).
   const SE3 T_W_C = keyframes_.back().T_A_C;
@@ -320,13 +427,14 @@ std::optional<Submap> Tracker::takeWindowIfDue(double t) {
     window_started_ = true;
     window_last_t_ = keyframes_.front().stamp;
   }
-  if (t - window_last_t_ < params_.window.period_s || window_next_kf_ >= keyframes_.size())
+  const std::size_t last = mappedKeyframes();  // a consistent point (see the header)
+  if (t - window_last_t_ < params_.window.period_s || window_next_kf_ >= last)
     return std::nullopt;
-  Submap s = buildWindow(keyframes_, landmarks_, lost_before_, window_next_kf_, keyframes_.size(),
-                         K_, window_header_, params_.window);
+  Submap s = buildWindow(keyframes_, landmarks_, lost_before_, window_next_kf_, last, K_,
+                         window_header_, params_.window);
   if (window_hook_) window_hook_(&s);
   ++window_header_.seq;
-  window_next_kf_ = keyframes_.size();
+  window_next_kf_ = last;
   window_last_t_ = t;
   return s;
 }

@@ -7,15 +7,36 @@
 // submaps go to an UplinkSender (disk spool, exactly-once delivery through the
 // caller's transport) and the coordinator plans with its measured bandwidth and
 // backlog; without one they are only counted (single-agent runs).
+//
+// Threads (agent_threads.h, DESIGN §9). Synchronous mode (params.threads.parallel
+// false, config `agent.parallel: false`, the default): every stage runs inside
+// feed(), deterministic and bit-identical to the single-threaded pipeline (the
+// offline runner and the tests rely on it). Parallel mode (`agent.parallel:
+// true` or setParallel(true) before the first frame; the nodelet's choice):
+// feed() tracks and returns without waiting for local BA (mapper thread,
+// tracker.h) or the window step (uplink thread: distill, encode, spool, send;
+// bounded queue, windows merged when it is full, never dropped). Then:
+//  * feed(), onAck(), pollUplink(), flushWindow(), retryCarriedWindow() and the
+//    accessors are called from one thread at a time (the caller's; the nodelet
+//    serialises its callbacks), as before;
+//  * the uplink transport is also called from the uplink thread, always under
+//    the pipeline's uplink lock (never two calls at once);
+//  * feed() does not poll the uplink (pollUplink / onAck and the uplink thread
+//    do); flushWindow() waits for both workers and drains their queues; the
+//    destructor finishes queued windows and joins the threads;
+//  * uplink() is for single-threaded use; read the sender through withUplink().
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <utility>
 #include <string>
 
+#include "hermes/agent/agent_threads.h"
 #include "hermes/agent/bandwidth_monitor.h"
 #include "hermes/agent/odometry_corruption.h"
 #include "hermes/agent/run_config.h"
@@ -41,6 +62,19 @@ class AgentPipeline {
   static Expected<std::unique_ptr<AgentPipeline>> create(const AgentPipelineParams& params,
                                                          const std::string& name,
                                                          const AgentCamera& camera);
+  ~AgentPipeline();
+  AgentPipeline(const AgentPipeline&) = delete;
+  AgentPipeline& operator=(const AgentPipeline&) = delete;
+
+  /// Switches to parallel (worker threads) or synchronous mode; overrides
+  /// params.threads.parallel. Call before the first frame (error otherwise).
+  Status setParallel(bool parallel);
+  bool parallel() const { return window_worker_ != nullptr; }
+  /// Test hook: runs on the mapper thread before every local BA solve (e.g. to
+  /// hold the mapper back). Parallel mode, before the first frame.
+  Status setMapperHook(std::function<void()> before_solve);
+  /// Counters of the stages and their queues (both modes).
+  AgentThreadStats threadStats() const;
 
   /// Tracks one frame (stereo: left+right, RGB-D: left+depth). Errors: malformed
   /// frame, or a stamp not after the previous one.
@@ -53,12 +87,17 @@ class AgentPipeline {
   std::int64_t lostFrames() const { return lost_; }
   /// Fraction of fed frames not tracked (lost, or not yet initialised).
   double lostRate() const { return frames_ > 0 ? double(lost_) / double(frames_) : 0.0; }
-  const TimingStats& timings() const { return timings_; }
+  /// Per-stage timings: track, window (the cut alone in parallel mode),
+  /// agent_total (feed() as a whole), distill, encode (on the uplink thread in
+  /// parallel mode).
+  TimingStats timings() const;
   const Tracker& tracker() const { return tracker_; }
-  /// Windows distilled and encoded so far (all zero until windows exist).
-  const WindowCounters& windows() const { return windows_; }
-  std::int64_t submapsSent() const { return windows_.sent; }
-  std::int64_t bytesSent() const { return windows_.bytes; }
+  /// Windows distilled and encoded so far (all zero until windows exist). In
+  /// parallel mode a copy of the counters as of the uplink stage's last job,
+  /// without the carried / held maps (hasCarriedWindow tells).
+  WindowCounters windows() const;
+  std::int64_t submapsSent() const { return windows().sent; }
+  std::int64_t bytesSent() const { return windows().bytes; }
 
   /// This agent's share of the metrics JSON (no accuracy fields: see fillAccuracy).
   AgentMetrics metrics() const;
@@ -68,33 +107,50 @@ class AgentPipeline {
   /// UplinkSender that hands frames to `transport`. Uplink time = frame stamp -
   /// `clock_offset_s` (the offline runner's simulated clock starts at 0 for every
   /// agent). Call once, before the first frame. Errors: spool cannot be opened.
+  /// `transport` runs under the pipeline's uplink lock (on the uplink thread in
+  /// parallel mode): it must not call back into the pipeline.
   Status attachUplink(UplinkSender::Transport transport, double clock_offset_s = 0);
   /// Replaces the stamp-based uplink clock by `clock` (e.g. wall time in a ROS
   /// node, where frame stamps and the network need not advance together).
-  void setUplinkClock(std::function<double()> clock) { uplink_clock_ = std::move(clock); }
+  void setUplinkClock(std::function<double()> clock) {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    uplink_clock_ = std::move(clock);
+  }
   /// Server acknowledgement at uplink time `now` (duplicates are fine).
   Status onAck(std::uint32_t session, std::uint64_t seq, double now);
   /// Lets the uplink send what it may at uplink time `now` (feed() also does).
   void pollUplink(double now);
   /// End of the sequence: distils and submits the open (partial) window now.
+  /// Parallel mode: first finishes the local BAs, and returns once the uplink
+  /// stage has distilled and submitted everything queued.
   void flushWindow();
   /// After the end of the sequence: a window deferred or refused (link too slow,
   /// spool full) is distilled again at uplink time `now` and submitted if it fits.
-  /// Call once per window period while draining.
+  /// Call once per window period while draining. Parallel mode: queued for the
+  /// uplink thread.
   void retryCarriedWindow(double now);
   /// A deferred / refused window waits to be sent.
-  bool hasCarriedWindow() const { return windows_.carry.has_value(); }
+  bool hasCarriedWindow() const;
   /// Test hook: from now on the odometry (trajectory and windows) is corrupted
   /// as `params` says (odometry_corruption.h). Call before the first frame.
   void setOdometryCorruption(const OdometryCorruptionParams& params);
   /// Loops the server reports for this agent (the coordinator's alpha rule).
-  void setLoopClosures(int loops) { loop_closures_ = loops; }
-  /// Null until attachUplink().
+  void setLoopClosures(int loops) { loop_closures_.store(loops); }
+  /// Null until attachUplink(). Not for parallel mode while frames flow (the
+  /// uplink thread uses the sender): see withUplink().
   const UplinkSender* uplink() const { return uplink_.get(); }
   UplinkSender* uplink() { return uplink_.get(); }
+  /// Calls `f(const UplinkSender*)` (null without an uplink) under the uplink
+  /// lock and returns its result: safe in both modes.
+  template <typename F>
+  auto withUplink(F&& f) const {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    return f(static_cast<const UplinkSender*>(uplink_.get()));
+  }
   const Uuid& agentId() const { return agent_id_; }
   /// (session, seq) of the last submap handed to the uplink, nullopt before the first.
   std::optional<std::pair<std::uint32_t, std::uint64_t>> lastSubmitted() const {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
     return last_window_;
   }
   std::uint32_t session() const { return session_; }
@@ -105,6 +161,22 @@ class AgentPipeline {
   /// The window step at tracker time `stamp` (uplink time: the last frame's;
   /// when retrying the carried window: stamp - clock offset).
   void windowStep(double stamp, bool retry_carry = false);
+
+  /// Parallel mode: one job of the uplink stage.
+  struct WindowJob {
+    std::optional<Submap> window;  ///< nullopt: retry the carried window
+    distill::MotionHint motion;    ///< tracker motion at the cut
+    double stamp = 0;              ///< [s] tracker time of the step
+    double link_stamp = 0;         ///< [s] stamp the uplink clock derives from
+    int periods = 1;               ///< window periods it stands for (merged jobs: more)
+  };
+  void startWorkers(bool parallel);
+  /// Cuts the due window (or a due retry) and queues it (caller's thread).
+  void queueWindowStep(double stamp, double link_stamp);
+  /// Runs on the uplink thread.
+  void runWindowJob(WindowJob& job);
+  /// The uplink stage's counters as the caller's accessors see them.
+  void publishWindowCounters(const TimingStats& job_timings);
 
   AgentPipelineParams params_;
   std::string name_;
@@ -118,7 +190,8 @@ class AgentPipeline {
   std::unique_ptr<UplinkSender> uplink_;
   double clock_offset_ = 0;
   std::function<double()> uplink_clock_;
-  int loop_closures_ = 0;
+  std::atomic<int> loop_closures_{0};
+  mutable std::mutex uplink_mu_;  ///< uplink_ (sender, its monitor), last_window_*
   std::optional<std::pair<std::uint32_t, std::uint64_t>> last_window_;  ///< last submitted
   bool last_window_acked_ = false;
   std::int64_t frames_ = 0, lost_ = 0;
@@ -127,6 +200,16 @@ class AgentPipeline {
   WindowCounters windows_;
   double last_stamp_ = 0;
   TimingStats timings_;
+  // Parallel mode.
+  double window_s_ = 5;             ///< distill.window_s (carried-window retries)
+  std::int64_t window_retries_ = 0;
+  WindowCounters stage_windows_;    ///< the uplink thread's own (with carry / held)
+  mutable std::mutex stats_mu_;     ///< the published copies below
+  TimingStats stage_timings_;       ///< distill / encode on the uplink thread
+  bool carry_pending_ = false;      ///< published: a window is carried
+  double carry_stamp_ = 0;
+  std::function<void()> mapper_hook_;
+  std::unique_ptr<StageWorker<WindowJob>> window_worker_;  ///< last: stopped first
 };
 
 }  // namespace hermes::agent

@@ -14,6 +14,8 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -56,6 +58,35 @@ struct LocalMappingStats {
   std::vector<std::pair<LandmarkId, std::uint32_t>> triangulated;
 };
 
+/// A windowed bundle adjustment cut out of the map (LocalMapper::cutBa): copies
+/// of the window's keyframe poses, landmark positions and observations, so it can
+/// be solved (solveLocalBa) on any thread while the map goes on changing, then
+/// written back by LocalMapper::applyBa on the map's own thread.
+struct LocalBaJob {
+  BaProblem problem;
+  std::vector<KeyframeId> pose_kf;   ///< map keyframe of each problem pose
+  std::vector<LandmarkId> point_lm;  ///< map landmark of each problem point
+  /// Map observation of each problem observation (found again by keyframe and
+  /// keypoint when the outliers are removed: indices may have moved meanwhile).
+  struct Ref {
+    LandmarkId lm;
+    KeyframeId keyframe;
+    std::uint32_t keypoint;
+  };
+  std::vector<Ref> refs;
+  KeyframeId newest = 0;       ///< the newest keyframe (free) when cut
+  SE3 T_W_newest;              ///< its pose when cut
+  std::size_t keyframes = 0;   ///< map sizes when cut: later ids were created after
+  std::size_t landmarks = 0;
+  BundleAdjustmentParams params;
+  LocalMappingStats stats;     ///< problem size (set when cut), solve figures
+  std::optional<BaSummary> summary;  ///< set by a successful solve
+  std::function<void()> before_solve;  ///< test hook, run on the solving thread
+};
+
+/// Solves the job's problem in place (pure: touches nothing but the job).
+void solveLocalBa(LocalBaJob* job);
+
 class LocalMapper {
  public:
   LocalMapper(const LocalMapperParams& params, const PinholeIntrinsics& K, double baseline);
@@ -71,12 +102,30 @@ class LocalMapper {
   LocalMappingStats process(std::vector<Keyframe>* keyframes, std::vector<Landmark>* landmarks,
                             const std::vector<float>& scales);
 
+  /// The parts of process() that change the map's structure (culling,
+  /// triangulation, fusion) for the newest keyframe; fills culled, fused and
+  /// triangulated of `stats`.
+  void processStructure(std::vector<Keyframe>* keyframes, std::vector<Landmark>* landmarks,
+                        const std::vector<float>& scales, LocalMappingStats* stats);
+  /// The bundle adjustment window around the newest keyframe as a job (its
+  /// stats hold the problem size); nullopt when BA is off or the map has fewer
+  /// than two keyframes.
+  std::optional<LocalBaJob> cutBa(const std::vector<Keyframe>& keyframes,
+                                  const std::vector<Landmark>& landmarks,
+                                  const std::vector<float>& scales) const;
+  /// Writes a solved job back into the map: poses of its free keyframes,
+  /// positions of its landmarks not culled since, removal of its outlier
+  /// observations still present. Keyframes and landmarks created after the cut
+  /// (ids >= job.keyframes / job.landmarks, not in the job) move with the newest
+  /// keyframe's correction so they stay consistent with the adjusted window
+  /// (none exist when the job is applied at once). Nothing happens when the
+  /// solve failed. Fills ba_ms, ba_iterations and outliers_removed of `stats`.
+  void applyBa(const LocalBaJob& job, std::vector<Keyframe>* keyframes,
+               std::vector<Landmark>* landmarks, LocalMappingStats* stats);
+
   const LocalMapperParams& params() const { return params_; }
 
  private:
-  LocalMappingStats cullTriangulateFuseAdjust(std::vector<Keyframe>* keyframes,
-                                              std::vector<Landmark>* landmarks,
-                                              const std::vector<float>& scales);
   void removeObservation(std::vector<Keyframe>* kfs, Landmark* l, std::size_t index);
   void cull(std::vector<Keyframe>* kfs, Landmark* l);
   void fuse(std::vector<Keyframe>* kfs, std::vector<Landmark>* lms,

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "hermes/agent/agent_threads.h"
 #include "hermes/agent/camera_input_params.h"
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/uplink_sender.h"
@@ -25,6 +26,7 @@ struct AgentPipelineParams {
   TrackerParams tracker;             ///< sections orb, stereo, rgbd, matching, pose, keyframe, tracker
   distill::DistillParams distill;    ///< section distill
   UplinkParams uplink;               ///< section uplink (buffer, monitor)
+  AgentThreadParams threads;         ///< section agent (parallel, window_queue)
 
   Status read(const Config& config);
   Status validate() const;

@@ -8,11 +8,30 @@
 // two-view triangulation against covisible keyframes, windowed bundle adjustment). Every window period the map since the previous
 // window can be taken as a Submap for distillation (takeWindowIfDue).
 // Landmark fusion merges duplicates seen by the newest keyframe.
+//
+// Parallel mapping (setParallelMapping, DESIGN §9 agent threads): the local
+// bundle adjustment then runs on a mapper thread and feed() never waits for it.
+// Culling, triangulation and fusion still run on insertion (they change ids the
+// tracker uses; they are short); the BA window is cut as a job of copies
+// (LocalMapper::cutBa), solved on the mapper thread, and written back by feed()
+// itself at the start of a later frame (LocalMapper::applyBa: a short critical
+// section on the caller's thread, so the map has a single writer and needs no
+// lock). Keyframes and landmarks created while a BA runs are kept and follow
+// the newest adjusted keyframe's correction; so does the motion model.
+// Policy (bounded: at most one BA job waits or runs): keyframes are never
+// dropped; keyframes inserted while a BA runs wait and are merged into the next
+// job, which adjusts the newest mapping.ba_window keyframes: waiting keyframes
+// older than that window get no BA of their own (counted as skipped). Windows
+// (takeWindowIfDue) end at the newest keyframe whose BA has been applied, a
+// consistent point: every keyframe handed out was adjusted (or skipped) once,
+// as in synchronous mode; the later ones go to the next window.
 #pragma once
 
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -25,6 +44,7 @@
 #include "hermes/agent/orb_extractor.h"
 #include "hermes/agent/pose_estimation.h"
 #include "hermes/agent/rgbd_depth.h"
+#include "hermes/agent/stage_worker.h"
 #include "hermes/agent/stereo_matcher.h"
 #include "hermes/agent/submap_window.h"
 #include "hermes/core/config.h"
@@ -78,9 +98,40 @@ struct TrackResult {
   LocalMappingStats mapping;  ///< filled when new_keyframe (T_W_C is then the optimised pose)
 };
 
+/// Counters of the local mapping stage (see the policy above).
+struct MappingStageStats {
+  std::int64_t keyframes = 0;   ///< keyframes inserted after the first
+  std::int64_t ba_jobs = 0;     ///< local BAs run (parallel: every job applied, solved or not)
+  std::int64_t merged = 0;      ///< keyframes whose BA was merged into a later job
+  std::int64_t skipped = 0;     ///< keyframes left out of every BA window (mapper behind)
+  std::int64_t max_waiting = 0; ///< most keyframes waiting for a BA at once
+  double ba_ms_total = 0, ba_ms_max = 0;  ///< solve times (on the mapper thread if parallel) [ms]
+  /// Parallel: culling, triangulation and fusion, which stay in feed() [ms].
+  double structure_ms_total = 0, structure_ms_max = 0;
+};
+
 class Tracker {
  public:
   Tracker(const TrackerParams& params, const PinholeIntrinsics& K, double baseline);
+  ~Tracker();
+  Tracker(const Tracker&) = delete;
+  Tracker& operator=(const Tracker&) = delete;
+
+  /// Runs the local BA on a mapper thread (true) or inside feed() (false, the
+  /// default: bit-identical to the synchronous pipeline). Call before the first
+  /// frame. `before_solve` (test hook, may be empty) runs on the mapper thread
+  /// before every solve, e.g. to hold the mapper back.
+  void setParallelMapping(bool parallel, std::function<void()> before_solve = {});
+  bool parallelMapping() const { return ba_worker_ != nullptr; }
+  /// Parallel mapping: waits for the running BA, applies it and runs the BA of
+  /// the keyframes still waiting, until none waits (end of sequence / flush).
+  /// No-op in synchronous mode.
+  void finishMapping();
+  /// Counters of the local mapping stage (both modes).
+  MappingStageStats mappingStats() const { return mapping_stats_; }
+  /// Keyframes a window may hand out: all in synchronous mode, those up to the
+  /// newest adjusted one in parallel mode.
+  std::size_t mappedKeyframes() const;
 
   /// Processes one frame. Errors: malformed frame (empty, wrong type or size).
   Expected<TrackResult> feed(const CameraFrame& frame);
@@ -115,6 +166,11 @@ class Tracker {
   /// Landmarks seen by the last `keyframes` keyframes (good ones only).
   std::vector<std::size_t> localMap(int keyframes) const;
   void runLocalMapping(TrackResult* r, const std::vector<float>& scales);
+  /// Parallel mapping: applies a finished BA (if any), then starts the next one
+  /// when keyframes wait and the mapper is free.
+  void pollMapping();
+  void scheduleBa();
+  void applyFinishedBa(const LocalBaJob& job);
 
   TrackerParams params_;
   PinholeIntrinsics K_;
@@ -139,6 +195,17 @@ class Tracker {
   double window_last_t_ = 0;
   bool window_started_ = false;
   std::function<void(Submap*)> window_hook_;
+  // Parallel mapping (all touched by the caller's thread only, except the
+  // finished-job mailbox, which the mapper thread fills under done_mu_).
+  MappingStageStats mapping_stats_;
+  std::function<void()> before_solve_;
+  std::vector<float> ba_scales_;      ///< pyramid scales for the BA jobs
+  std::size_t mapped_keyframes_ = 0;  ///< keyframes [0, n) adjusted or skipped
+  int waiting_keyframes_ = 0;         ///< inserted, no BA job cut yet
+  bool ba_in_flight_ = false;         ///< a job was pushed and not yet applied
+  std::mutex done_mu_;
+  std::optional<LocalBaJob> done_;    ///< solved, waiting to be applied
+  std::unique_ptr<agent::StageWorker<LocalBaJob>> ba_worker_;  ///< last: joined first
 };
 
 }  // namespace hermes
