@@ -164,6 +164,19 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
   return result;
 }
 
+Status AgentPipeline::submitWindow(const Submap& submap, std::vector<std::uint8_t>&& bytes, double now) {
+  // Whether the previous window arrived before this one was planned decides
+  // the monitor's probing (DESIGN §3).
+  if (last_window_) uplink_->monitor().onWindowDelivered(last_window_acked_);
+  const auto key = std::make_pair(submap.header.session, submap.header.seq);
+  Status s = uplink_->submit(key.first, key.second, std::move(bytes), now);
+  if (s) {
+    last_window_ = key;
+    last_window_acked_ = false;
+  }
+  return s;
+}
+
 void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   if (!uplink_) {
     if (retry_carry)
@@ -179,16 +192,7 @@ void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
   sink.loop_closures = loop_closures_;
   sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
-    // Whether the previous window arrived before this one was planned decides
-    // the monitor's probing (DESIGN §3).
-    if (last_window_) uplink_->monitor().onWindowDelivered(last_window_acked_);
-    const auto key = std::make_pair(submap.header.session, submap.header.seq);
-    Status s = uplink_->submit(key.first, key.second, std::move(bytes), now);
-    if (s) {
-      last_window_ = key;
-      last_window_acked_ = false;
-    }
-    return s;
+    return submitWindow(submap, std::move(bytes), now);
   };
   if (retry_carry)
     agent::retryCarriedWindow(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
@@ -313,14 +317,7 @@ void AgentPipeline::runWindowJob(WindowJob& job) {
   sink.loop_closures = loop_closures_.load();
   sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
     std::lock_guard<std::mutex> lock(uplink_mu_);
-    if (last_window_) uplink_->monitor().onWindowDelivered(last_window_acked_);
-    const auto key = std::make_pair(submap.header.session, submap.header.seq);
-    Status s = uplink_->submit(key.first, key.second, std::move(bytes), now);
-    if (s) {
-      last_window_ = key;
-      last_window_acked_ = false;
-    }
-    return s;
+    return submitWindow(submap, std::move(bytes), now);
   };
   const WindowSink* out = have_uplink ? &sink : nullptr;
   WindowCounters& c = stage_windows_;

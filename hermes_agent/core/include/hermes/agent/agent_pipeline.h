@@ -34,6 +34,7 @@
 #include <mutex>
 #include <optional>
 #include <utility>
+#include <vector>
 #include <string>
 
 #include "hermes/agent/agent_threads.h"
@@ -161,6 +162,9 @@ class AgentPipeline {
   /// The window step at tracker time `stamp` (uplink time: the last frame's;
   /// when retrying the carried window: stamp - clock offset).
   void windowStep(double stamp, bool retry_carry = false);
+  /// Hands an encoded window to the uplink at uplink time `now` (parallel mode:
+  /// under uplink_mu_) and tells the monitor whether the previous one arrived.
+  Status submitWindow(const Submap& submap, std::vector<std::uint8_t>&& bytes, double now);
 
   /// Parallel mode: one job of the uplink stage.
   struct WindowJob {
