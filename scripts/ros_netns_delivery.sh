@@ -261,8 +261,21 @@ log "SIGKILL to the agent's roslaunch and its nodes (pids $KILLED; spool pending
 for _ in $(seq 50); do [[ -z "$(alive $KILLED)" ]] && break; sleep 0.1; done
 [[ -z "$(alive $KILLED)" ]] || fail "agent processes $(alive $KILLED) survived SIGKILL"
 sleep "$RESTART_DELAY"
-G_AGENT2=$(start_agent "$LOGS/agent_run2.log" "$RESTART_CLEAR"); PGIDS+=("$G_AGENT2")
-log "agent run 2 started (pgid $G_AGENT2, same spool, clear_spool:=$RESTART_CLEAR)"
+# roslaunch itself (before any Hermes node) can fail to reach the master through the
+# lossy link ("could not contact master"): that is the tool, not the agent under
+# test, so the restart is tried again (at most 3 times, each logged).
+for try in 1 2 3; do
+  G_AGENT2=$(start_agent "$LOGS/agent_run2.log" "$RESTART_CLEAR"); PGIDS+=("$G_AGENT2")
+  log "agent run 2 started (pgid $G_AGENT2, same spool, clear_spool:=$RESTART_CLEAR, try $try)"
+  for _ in $(seq 150); do  # 15 s: roslaunch has reached the master or given up by then
+    grep -q "could not contact master" "$LOGS/agent_run2.log" 2>/dev/null && break
+    grep -q "process\[" "$LOGS/agent_run2.log" 2>/dev/null && break
+    sleep 0.1
+  done
+  grep -q "could not contact master" "$LOGS/agent_run2.log" 2>/dev/null || break
+  log "agent run 2: roslaunch could not contact the master through the lossy link; starting it again"
+  cp "$LOGS/agent_run2.log" "$LOGS/agent_run2_try$try.log"
+done
 
 # Wait for run 2 to finish its sequence, its spool to drain and the server to apply it all.
 "$PY" - "$LOGS/agent_state.json" "$LOGS/server_state.json" "$DRAIN_TIMEOUT" "$RATE" <<'PY' >&2 || true

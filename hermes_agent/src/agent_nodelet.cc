@@ -18,7 +18,8 @@
 //        uplink_status (std_msgs/String JSON, latched; after every new submap and at
 //        1 Hz): session, submaps created by this process, spool pending keys/bytes,
 //        spool cap -- what the delivery tests count as "sent" -- and `frames`:
-//        images received, pairs, frames tracked / lost, rejected per cause
+//        images received, pairs, frames tracked / lost, rejected per cause;
+//        `threads`: local BA jobs, keyframes merged / skipped, windows queued
 // Params (private): robot (default: the namespace), camera (a name under
 // config/cameras/ or a calibration file / folder: camera_calibration.h),
 // mode (stereo|rgbd; default: the calibration's kind, else stereo),
@@ -27,8 +28,11 @@
 // dataset (folder played by the DatasetPlayer: camera and body<-camera from
 // it), queue_size (per image topic, 30), spool_dir (default
 // /tmp/hermes_spool/<robot>), clear_spool (false: unacked submaps of a
-// previous run are resent). The uplink runs on wall time. Images are paired
-// under one mutex, the pipeline runs under another (it is not thread-safe).
+// previous run are resent), parallel (true: local BA and the window step run
+// on the pipeline's worker threads, so tracking never waits for them; false:
+// inside the image callback, as the offline runner does). The uplink runs on
+// wall time. Images are paired under one mutex, the pipeline's calls are made
+// under another (its uplink thread calls the transport, which only publishes).
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/SubmapAck.h>
@@ -114,6 +118,10 @@ class AgentNodelet : public nodelet::Nodelet {
     params_ = run.agent;
     input_params_ = run.camera_input;
     if (rectified != "auto") input_params_.stereo_images = rectified == "true" ? "rectified" : "raw";
+    // Real time: tracking never waits for local BA or the window step (worker
+    // threads, agent_threads.h); ~parallel false runs them inside the image
+    // callback as the offline runner does.
+    pnh.param("parallel", params_.threads.parallel, true);
     pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
     bool clear_spool = false;  // tests and demos: start without the previous run's backlog
     pnh.param("clear_spool", clear_spool, clear_spool);
@@ -327,7 +335,8 @@ class AgentNodelet : public nodelet::Nodelet {
     (*p)->setUplinkClock([] { return ros::WallTime::now().toSec(); });
     pipeline_ = std::move(*p);
     uuid_ = hermes::toString(pipeline_->agentId());
-    replayed_ = pipeline_->uplink()->buffer().pendingKeys();  // a previous run's backlog
+    replayed_ = pipeline_->withUplink(  // a previous run's backlog
+        [](const hermes::agent::UplinkSender* up) { return up->buffer().pendingKeys(); });
     publishUplinkStatus();
     NODELET_INFO("Agent %s: uuid %s session %u", robot_.c_str(), uuid_.c_str(), pipeline_->session());
     return true;
@@ -446,8 +455,7 @@ class AgentNodelet : public nodelet::Nodelet {
       for (const auto& [session, seq] : k) a.push_back({session, seq});
       return a;
     };
-    const hermes::agent::UplinkSender& up = *pipeline_->uplink();
-    const hermes::agent::WindowCounters& w = pipeline_->windows();
+    const hermes::agent::WindowCounters w = pipeline_->windows();
     nlohmann::json j;
     j["robot"] = robot_;
     j["uuid"] = uuid_;
@@ -455,16 +463,27 @@ class AgentNodelet : public nodelet::Nodelet {
     j["session"] = pipeline_->session();
     j["created"] = keys(created_);
     j["replayed"] = keys(replayed_);
-    j["pending"] = keys(up.buffer().pendingKeys());
     j["windows"] = {{"total", w.windows}, {"submitted", w.sent}, {"deferred", w.deferred},
                     {"failed", w.failed}, {"refused", w.refused},
                     {"extended_keyframes", w.extended_keyframes}};
-    j["sends"] = up.stats().sends;
-    j["resends"] = up.stats().resends;
-    j["acked"] = up.stats().acked;
-    j["spool_pending_bytes"] = up.buffer().pendingBytes();
-    j["spool_file_bytes"] = up.buffer().fileBytes();
+    pipeline_->withUplink([&](const hermes::agent::UplinkSender* up) {  // the uplink thread shares it
+      j["pending"] = keys(up->buffer().pendingKeys());
+      j["sends"] = up->stats().sends;
+      j["resends"] = up->stats().resends;
+      j["acked"] = up->stats().acked;
+      j["spool_pending_bytes"] = up->buffer().pendingBytes();
+      j["spool_file_bytes"] = up->buffer().fileBytes();
+    });
     j["spool_cap_bytes"] = static_cast<std::int64_t>(params_.uplink.buffer.max_mbytes * 1e6);
+    const hermes::agent::AgentThreadStats t = pipeline_->threadStats();
+    j["threads"] = {{"parallel", t.parallel},
+                    {"ba_jobs", t.mapping.ba_jobs},
+                    {"keyframes_merged", t.mapping.merged},
+                    {"keyframes_skipped", t.mapping.skipped},
+                    {"max_keyframes_waiting", t.mapping.max_waiting},
+                    {"windows_queued", t.windows.pushed},
+                    {"windows_merged", t.windows.merged},
+                    {"window_queue_high_water", t.windows.high_water}};
     j["done"] = done_;
     j["frames"] = frameCounts();
     std_msgs::String m;
