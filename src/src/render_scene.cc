@@ -107,6 +107,14 @@ bool overlaps(const SceneBox& a, const SceneBox& b, double gap) {
 
 }  // namespace
 
+void appendRigPositions(const Trajectory& trajectory, const std::vector<SE3>& T_B_C,
+                        std::vector<Vec3>* positions) {
+  for (const StampedPose& pose : trajectory) {
+    positions->push_back(pose.T_W_B.translation());
+    for (const SE3& T : T_B_C) positions->push_back((pose.T_W_B * T).translation());
+  }
+}
+
 Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const SceneParams& p) {
   if (Status st = p.validate(); !st) return Error{st.error()};
   if (camera_positions.empty()) return Error{"scene: no camera positions to enclose"};

@@ -136,12 +136,7 @@ int main(int argc, char** argv) {
   // One scene around every camera position of every trajectory (whole trajectories,
   // independent of --start/--duration/--format, so windows of one seed share it).
   std::vector<Vec3> positions;
-  for (const Trajectory& t : trajs)
-    for (const StampedPose& sp : t) {
-      positions.push_back(sp.T_W_B.translation());
-      positions.push_back((sp.T_W_B * cam0.T_B_C).translation());
-      positions.push_back((sp.T_W_B * cam1.T_B_C).translation());
-    }
+  for (const Trajectory& t : trajs) render::appendRigPositions(t, {cam0.T_B_C, cam1.T_B_C}, &positions);
   render::SceneParams sp;
   sp.seed = static_cast<std::uint64_t>(seed_d);
   sp.poor_fraction = poor_fraction;

@@ -35,11 +35,7 @@ const std::string& renderedClip() {
   if (!gt.ok()) throw std::runtime_error(gt.error());
   const PinholeRadtan cam0 = render::eurocCam0(), cam1 = render::eurocCam1();
   std::vector<Vec3> positions;
-  for (const StampedPose& p : *gt) {
-    positions.push_back(p.T_W_B.translation());
-    positions.push_back((p.T_W_B * cam0.T_B_C).translation());
-    positions.push_back((p.T_W_B * cam1.T_B_C).translation());
-  }
+  render::appendRigPositions(*gt, {cam0.T_B_C, cam1.T_B_C}, &positions);
   render::SceneParams sp;
   sp.seed = 7;
   auto scene = render::buildScene(positions, sp);

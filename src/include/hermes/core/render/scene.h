@@ -13,6 +13,7 @@
 #include "hermes/core/geometry.h"
 #include "hermes/core/render/texture.h"
 #include "hermes/core/status.h"
+#include "hermes/core/trajectory.h"
 
 namespace hermes {
 namespace render {
@@ -55,6 +56,11 @@ struct SceneParams {
 
 /// Builds the scene enclosing every given camera position (world frame).
 Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const SceneParams& p);
+
+/// Appends, per pose of `trajectory` (body poses), the body position and then
+/// each camera's position (T_W_B * T_B_C): what buildScene must enclose.
+void appendRigPositions(const Trajectory& trajectory, const std::vector<SE3>& T_B_C,
+                        std::vector<Vec3>* positions);
 
 /// Distance from p to the closed box [lo, hi] (0 inside).
 double distanceToBox(const Vec3& p, const Vec3& lo, const Vec3& hi);
