@@ -305,6 +305,7 @@ void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, Merge
     e->id = loop.id;
     e->accepted = loop.accepted;
     loop = *e;
+    pcm_cache_.forget(loop.id);
     ++stats->loops_replaced;
   }
 }
@@ -320,7 +321,11 @@ void MapManager::runPcm() {
     c.covariance = e.covariance;
     candidates.push_back(c);
   }
-  const PcmResult r = selectConsistentLoops(candidates, chain_.query(), params_.pcm);
+  if (chain_.revision() != pcm_chain_revision_) {
+    pcm_cache_.clear();
+    pcm_chain_revision_ = chain_.revision();
+  }
+  const PcmResult r = selectConsistentLoops(candidates, chain_.query(), params_.pcm, &pcm_cache_);
   std::set<std::uint64_t> accepted(r.accepted.begin(), r.accepted.end());
   for (LoopEdge& e : map_.loops) e.accepted = accepted.count(e.id) > 0;
   if (accepted != accepted_) graph_dirty_ = true;

@@ -79,6 +79,7 @@ Status PcmParams::validate() const {
 Status OdometryChain::addKeyframe(const KeyframeKey& key, const SE3& T_A_K) {
   Trajectory& traj = trajectories_[trajectoryOf(key)];
   if (traj.count(key.id)) return Error{"odometry chain: keyframe " + keyText(key) + " added twice"};
+  if (!traj.empty() && key.id < traj.rbegin()->first) ++revision_;
   traj[key.id].T_A_K = T_A_K;
   return Status::Ok();
 }
@@ -171,7 +172,8 @@ Expected<double> cycleMahalanobis2(const LoopCandidate& i, const LoopCandidate& 
 }
 
 PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
-                                const OdometryQuery& odometry, const PcmParams& params) {
+                                const OdometryQuery& odometry, const PcmParams& params,
+                                PcmCache* cache) {
   const auto t0 = std::chrono::steady_clock::now();
   PcmResult res;
   const double gate = chi2Quantile(params.chi2_probability, 6);
@@ -187,12 +189,20 @@ PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
     std::vector<std::vector<char>> adj(n, std::vector<char>(n, 0));
     for (int i = 0; i < n; ++i) {
       for (int j = i + 1; j < n; ++j) {
+        const int known = cache ? cache->verdict(pair, group[i].id, group[j].id) : -1;
+        if (known >= 0) {
+          ++res.pairs_cached;
+          adj[i][j] = adj[j][i] = static_cast<char>(known);
+          continue;
+        }
+        ++res.pairs_computed;
         Expected<double> d2 = cycleMahalanobis2(group[i], group[j], odometry, params);
         if (!d2) {
           ++res.odometry_failures;
           continue;
         }
         adj[i][j] = adj[j][i] = *d2 < gate;
+        if (cache) cache->store(pair, group[i].id, group[j].id, adj[i][j]);
       }
     }
     std::vector<char> in(n, 0);

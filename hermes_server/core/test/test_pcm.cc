@@ -388,6 +388,64 @@ TEST(Pcm, TheDriftAllowanceStillRejectsWrongLoops) {
   EXPECT_GE(r.accepted.size(), right - 1);
 }
 
+TEST(Pcm, TheCacheGivesTheSameVerdictsAndComputesOnlyNewPairs) {
+  // Loops arrive in batches (as submaps do), right and wrong ones, across a
+  // jump: every cached run selects exactly what an uncached run selects, and
+  // computes only the pairs with a new loop.
+  std::mt19937 rng(13);
+  CorruptedWorld j = makeJumpWorld(rng, 60, 35);
+  const SE3 wrong_offset(expSO3(Vec3(0, 0, 20 * kDeg)), Vec3(1.0, -0.5, 0.1));
+  for (int i = 3; i < 57; i += 9) {
+    LoopCandidate l;
+    l.id = 1000 + i;
+    l.a = j.w.keys[0][i];
+    l.b = j.w.keys[1][i + 2];
+    l.T_a_b = j.w.truth.at(l.a).inverse() * wrong_offset * j.w.truth.at(l.b);
+    l.covariance = diagCov(0.01, 0.2 * kDeg);
+    j.loops.push_back(l);
+  }
+  std::shuffle(j.loops.begin(), j.loops.end(), rng);
+  PcmParams p;
+  p.min_clique_size = 3;
+  PcmCache cache;
+  std::vector<LoopCandidate> seen;
+  for (std::size_t k = 0; k < j.loops.size(); ++k) {
+    seen.push_back(j.loops[k]);
+    if (seen.size() % 4 != 0 && k + 1 != j.loops.size()) continue;
+    const long before = static_cast<long>(seen.size()) - (seen.size() % 4 ? seen.size() % 4 : 4);
+    const PcmResult plain = selectConsistentLoops(seen, j.w.chain.query(), p);
+    const PcmResult cached = selectConsistentLoops(seen, j.w.chain.query(), p, &cache);
+    EXPECT_EQ(cached.accepted, plain.accepted) << "after " << seen.size() << " loops";
+    EXPECT_EQ(cached.rejected, plain.rejected);
+    const long n = static_cast<long>(seen.size());
+    EXPECT_EQ(cached.pairs_computed + cached.pairs_cached, n * (n - 1) / 2);
+    EXPECT_EQ(cached.pairs_computed, n * (n - 1) / 2 - before * (before - 1) / 2);
+  }
+  // A re-measured loop (here: made wrong) is computed again once forgotten.
+  LoopCandidate& moved = seen.front();
+  moved.T_a_b = moved.T_a_b * SE3(expSO3(Vec3(0, 0.4, 0)), Vec3(0, 1.2, 0));
+  const long n = static_cast<long>(seen.size());
+  cache.forget(moved.id);
+  const PcmResult plain = selectConsistentLoops(seen, j.w.chain.query(), p);
+  const PcmResult cached = selectConsistentLoops(seen, j.w.chain.query(), p, &cache);
+  EXPECT_EQ(cached.pairs_computed, n - 1);
+  EXPECT_EQ(cached.accepted, plain.accepted);
+  EXPECT_TRUE(std::count(cached.rejected.begin(), cached.rejected.end(), moved.id));
+  EXPECT_GT(cache.bytes(), 0u);
+  cache.clear();
+  EXPECT_EQ(selectConsistentLoops(seen, j.w.chain.query(), p, &cache).pairs_cached, 0);
+}
+
+TEST(Pcm, TheChainRevisionGrowsOnlyWhenAKeyframeIsInsertedBetweenOthers) {
+  OdometryChain chain;
+  ASSERT_TRUE(chain.addKeyframe({0, 0, 2}, SE3()).ok());
+  ASSERT_TRUE(chain.addKeyframe({0, 0, 4}, SE3()).ok());
+  ASSERT_TRUE(chain.addKeyframe({1, 0, 1}, SE3()).ok());  // another trajectory
+  EXPECT_EQ(chain.revision(), 0u);
+  ASSERT_TRUE(chain.addKeyframe({0, 0, 3}, SE3()).ok());
+  EXPECT_EQ(chain.revision(), 1u);
+}
+
 TEST(Pcm, DriftAllowanceGrowsWithThePath) {
   PcmParams p;
   p.drift_fraction = 0.02;

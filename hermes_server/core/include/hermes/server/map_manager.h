@@ -161,6 +161,8 @@ class MapManager {
   PlaceRecognizer recognizer_;
   LoopCloser closer_;
   OdometryChain chain_;
+  PcmCache pcm_cache_;
+  std::uint64_t pcm_chain_revision_ = 0;  ///< chain_.revision() the cache holds
   GlobalMap map_;
   TimingStats timings_;
   GraphDiagnostics graph_diag_;

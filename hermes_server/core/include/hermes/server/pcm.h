@@ -88,6 +88,9 @@ class OdometryChain {
   Status addEdge(const KeyframeKey& from, const KeyframeKey& to, const Mat6& information);
   Expected<RelativePose> relative(const KeyframeKey& from, const KeyframeKey& to) const;
   OdometryQuery query() const;
+  /// Grows whenever the odometry between two existing keyframes may have
+  /// changed (a keyframe inserted between others); appending does not.
+  std::uint64_t revision() const { return revision_; }
 
  private:
   struct Entry {
@@ -97,6 +100,33 @@ class OdometryChain {
   };
   using Trajectory = std::map<KeyframeId, Entry>;
   std::map<std::pair<std::uint32_t, std::uint32_t>, Trajectory> trajectories_;
+  std::uint64_t revision_ = 0;
+};
+
+/// Verdicts of loop pairs from earlier runs, so that a run computes only the
+/// pairs with a new or re-measured loop (a whole mission's PCM was quadratic in
+/// its loops on every merge). A verdict depends on the two loop measurements and
+/// the odometry between them: forget() a loop whose measurement changed, clear()
+/// when odometry between existing keyframes changed (OdometryChain::revision())
+/// or the parameters did. Pairs whose odometry is unavailable are not stored.
+/// Storage: per trajectory pair, one byte per loop pair.
+class PcmCache {
+ public:
+  using Group = std::pair<std::pair<std::uint32_t, std::uint32_t>, std::pair<std::uint32_t, std::uint32_t>>;
+  /// 1 consistent, 0 inconsistent, -1 not known.
+  int verdict(const Group& group, std::uint64_t i, std::uint64_t j) const;
+  void store(const Group& group, std::uint64_t i, std::uint64_t j, bool consistent);
+  void forget(std::uint64_t loop);
+  void clear();
+  std::size_t bytes() const;
+
+ private:
+  struct Table {
+    std::map<std::uint64_t, int> index;       ///< loop id -> row
+    std::vector<std::vector<signed char>> rows;  ///< row r: verdicts with rows < r
+  };
+  int row(Table* t, std::uint64_t id);
+  std::map<Group, Table> tables_;
 };
 
 struct PcmResult {
@@ -106,12 +136,16 @@ struct PcmResult {
   bool all_exact = true;        ///< false when some group used the greedy heuristic
   int segment_cliques = 0;      ///< cliques accepted beyond the first (odometry breaks)
   int odometry_failures = 0;    ///< loop pairs whose odometry was unavailable (counted inconsistent)
+  long pairs_computed = 0;      ///< cycle distances computed in this run
+  long pairs_cached = 0;        ///< verdicts taken from the cache
   double time_ms = 0;
 };
 
-/// Runs PCM over all candidates (grouped by trajectory pair).
+/// Runs PCM over all candidates (grouped by trajectory pair). With a cache,
+/// known pair verdicts are reused and new ones stored (same result as without).
 PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
-                                const OdometryQuery& odometry, const PcmParams& params);
+                                const OdometryQuery& odometry, const PcmParams& params,
+                                PcmCache* cache = nullptr);
 
 /// Squared Mahalanobis distance of the cycle formed by loops i and j (both
 /// oriented from trajectory A to trajectory B), the odometry's covariance
