@@ -190,6 +190,12 @@ TEST(RunConfig, ShippedConfigsReadCleanly) {
   auto params = system::readSystemParams(*config);
   ASSERT_TRUE(params.ok()) << params.error();
   EXPECT_EQ(params->yaml(), system::SystemParams().yaml());
+  // ... and every key a module reads (a missing one is undocumented).
+  auto all = Config::fromString(system::SystemParams().yaml(), "defaults");
+  auto shipped = Config::fromFile(std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml");
+  ASSERT_TRUE(all.ok() && shipped.ok());
+  for (const std::string& key : all->unusedKeys())
+    EXPECT_TRUE(shipped->has(key)) << "config/hermes.yaml lacks " << key;
 
   auto bad = agent::loadRunConfig("", {"tracker.min_trackd=5"});
   ASSERT_TRUE(bad.ok());
