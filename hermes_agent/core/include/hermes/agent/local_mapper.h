@@ -27,8 +27,8 @@ namespace hermes {
 
 struct LocalMapperParams {
   bool enable_ba = true;
-  int ba_window = 5;            ///< newest keyframes optimised
-  int max_fixed = 8;            ///< covisible older keyframes held fixed
+  int ba_window = 10;           ///< newest keyframes optimised
+  int max_fixed = 10;           ///< covisible older keyframes held fixed
   int min_shared = 15;          ///< shared landmarks for covisibility
   int cull_after_keyframes = 3; ///< check a landmark this many keyframes after creation
   int min_observations = 2;     ///< ... it must then have at least this many keyframe views
