@@ -4,18 +4,25 @@
 // against the rendered ground truth (ATE after SE(3) alignment, < ~max_ate).
 // Prints and writes (~report, JSON) the numbers: frames, tracked, ATE, and the
 // stamp-to-pose latency (odometry arrival minus the arrival of the same image
-// at this test node, which subscribes to the first image topic too).
+// at this test node, which subscribes to the first image topic too), the
+// agent's per-stage timings (uplink_status) and the CPU its process used while
+// the bag played (cores: /proc/<pid>/stat of the pid uplink_status names,
+// sampled at each 1-Hz status between the first and the last frame).
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
 #include <std_msgs/String.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdint>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <mutex>
+#include <sstream>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -32,7 +39,26 @@ struct Observed {
   hermes::Trajectory odom;
   std::string status;
   double last_event = 0;  ///< wall time of the last image or odometry message
+  /// CPU samples of the agent's process while frames flow: (wall [s], CPU [s]).
+  std::vector<std::pair<double, double>> cpu;
 };
+
+/// User + system CPU time of a process [s]; < 0 when it cannot be read.
+double processCpuSeconds(long pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
+  std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const std::size_t close = text.rfind(')');  // the command name may hold spaces
+  if (close == std::string::npos) return -1;
+  std::istringstream rest(text.substr(close + 2));
+  std::string field;
+  double utime = -1, stime = -1;
+  for (int i = 3; i <= 15 && rest >> field; ++i) {  // fields 14, 15: utime, stime [ticks]
+    if (i == 14) utime = std::stod(field);
+    if (i == 15) stime = std::stod(field);
+  }
+  if (utime < 0 || stime < 0) return -1;
+  return (utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
+}
 
 double percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
@@ -52,6 +78,8 @@ TEST(BagInput, OdometryFromAPublishedLayoutBag) {
   pnh.param("max_ate", max_ate, max_ate);
   pnh.param("min_tracked", min_tracked, min_tracked);
   pnh.param("report", report, report);
+  double timeout_s = 120;  // wall time allowed for the whole bag
+  pnh.param("timeout_s", timeout_s, timeout_s);
   // A calibration from camera_info has no body frame: its odometry is the
   // (rectified) left / colour camera's, so the ground truth is taken there too.
   bool camera_frame = false;
@@ -82,14 +110,21 @@ TEST(BagInput, OdometryFromAPublishedLayoutBag) {
       });
   ros::Subscriber status_sub = nh.subscribe<std_msgs::String>(
       "/" + robot + "/uplink_status", 5, [&](const std_msgs::StringConstPtr& s) {
+        const double now = ros::WallTime::now().toSec();
         std::lock_guard<std::mutex> l(o.mu);
         o.status = s->data;
+        // CPU while frames flow: from the first image on, until the odometry stops.
+        if (o.image_wall.empty() || now - o.last_event > 1.0) return;
+        const auto j = nlohmann::json::parse(s->data, nullptr, false);
+        if (!j.is_object() || !j.contains("pid")) return;
+        const double cpu = processCpuSeconds(j["pid"].get<long>());
+        if (cpu >= 0) o.cpu.emplace_back(now, cpu);
       });
   ros::AsyncSpinner spinner(2);
   spinner.start();
 
   // Until every frame has a pose, or nothing arrived for 8 s after the first image.
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(120.0);
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
   while (ros::WallTime::now() < deadline) {
     ros::WallDuration(0.5).sleep();
     std::lock_guard<std::mutex> l(o.mu);
@@ -136,6 +171,12 @@ TEST(BagInput, OdometryFromAPublishedLayoutBag) {
       << "uplink_status counts other tracked frames than the odometry published";
   EXPECT_EQ(f.value("rejected", -1), 0) << f.dump();
   j["agent_frames"] = f;
+  if (status.contains("timings_ms")) j["agent_timings_ms"] = status["timings_ms"];
+  if (o.cpu.size() >= 2 && o.cpu.back().first > o.cpu.front().first) {
+    j["cpu_cores"] = (o.cpu.back().second - o.cpu.front().second) /
+                     (o.cpu.back().first - o.cpu.front().first);
+    std::printf("agent process CPU while playing: %.2f cores\n", j["cpu_cores"].get<double>());
+  }
 
   ASSERT_GE(o.odom.size(), 10u) << "too few poses to evaluate";
   const hermes::DatasetInfo& info = (*ds)->info();

@@ -484,6 +484,10 @@ class AgentNodelet : public nodelet::Nodelet {
                     {"windows_queued", t.windows.pushed},
                     {"windows_merged", t.windows.merged},
                     {"window_queue_high_water", t.windows.high_water}};
+    nlohmann::json timings = nlohmann::json::object();  // [ms] per stage since start
+    for (const auto& [stage, st] : pipeline_->timings().summary())
+      timings[stage] = {{"median", st.median}, {"p95", st.p95}, {"count", st.count}};
+    j["timings_ms"] = timings;
     j["done"] = done_;
     j["frames"] = frameCounts();
     std_msgs::String m;
