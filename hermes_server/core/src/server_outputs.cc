@@ -120,10 +120,20 @@ RunMetrics serverMetrics(const Server& server) {
     a.landmarks = static_cast<int64_t>(s->landmarks);
     a.bytes = static_cast<int64_t>(s->bytes_received);
     a.submaps_applied = static_cast<int64_t>(s->submaps_applied);
+    const HeldLoad* held = server.heldLoad(r);
+    a.held_submaps = static_cast<int64_t>(held ? held->submaps : 0);
+    a.held_bytes = static_cast<int64_t>(held ? held->bytes : 0);
+    a.held_bytes_peak = static_cast<int64_t>(held ? held->peak_bytes : 0);
     bytes += a.bytes.value_or(0);
     m.per_agent.push_back(a);
   }
   m.bytes_total = bytes;
+  const ReceiverStats& rs = server.receiverStats();
+  for (std::size_t c = 0; c < kReceiveCodes; ++c) {
+    const auto code = static_cast<ReceiveCode>(c);
+    if (code != ReceiveCode::kAccepted && rs.by_code[c] > 0)
+      m.frames_refused[toString(code)] = static_cast<int64_t>(rs.by_code[c]);
+  }
   return m;
 }
 
