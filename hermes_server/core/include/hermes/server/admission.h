@@ -17,9 +17,11 @@
 // nothing held always gets one submap in, whatever its size (DecodeLimits bound
 // a single frame), so no submap is refused forever. Resends of submaps already
 // accepted are acknowledged without touching the quota, and the other robots'
-// bounds are untouched by whatever one robot sends: a flooding or looping robot
-// costs the others a tag check per frame, nothing more. Memory held per robot is
-// reported in the metrics (per_agent held_submaps / held_bytes / held_bytes_peak).
+// bounds are untouched by whatever one robot sends: beyond its own bounded
+// share of the queue, a flooding or looping robot costs the server a CRC and a
+// tag check per frame (no decode). Memory held per robot is reported in the
+// metrics (per_agent held_submaps / held_bytes / held_bytes_peak). The merge
+// order itself stays the credibility queue's (credibility.h).
 #pragma once
 
 #include <cstddef>
