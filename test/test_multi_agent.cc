@@ -222,7 +222,7 @@ TEST(MultiAgent, UnauthenticatedFramesAreRefusedWithReasons) {
     hermes_msgs::EncodedSubmap m;
     m.header.stamp = ros::Time::now();
     m.agent_uuid = hermes::toString(s.header.agent);
-    m.session = 0;
+    m.session = s.header.session;
     m.seq = seq;
     m.data = *f;
     return m;
