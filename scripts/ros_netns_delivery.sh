@@ -197,11 +197,13 @@ wait_file() {  # wait_file <file> <text> <seconds>
   return 1
 }
 
+# Authentication on, as the launch files default to: this run's own keys.
+"$ROOT/scripts/keys.sh" add "$ROBOT" --dir "$LOGS/keys" >/dev/null || fail "cannot create the robot's key"
 G=$(start_in "$NS_S" "$ADDR_S" "$LOGS/roscore.log" roscore -p 11311); PGIDS+=("$G"); G_CORE=$G
 wait_master "$NS_S" "$ADDR_S" || fail "roscore did not come up: $(tail -5 "$LOGS/roscore.log")"
 wait_master "$NS_A" "$ADDR_A" || fail "the master is not reachable from the agent namespace"
 G=$(start_in "$NS_S" "$ADDR_S" "$LOGS/server.log" roslaunch --wait "$ROOT/hermes_server/launch/server.launch" \
-  "config:=$LOGS/config.yaml" "output_dir:=$LOGS/server_out"); PGIDS+=("$G"); G_SERVER=$G
+  "config:=$LOGS/config.yaml" "output_dir:=$LOGS/server_out" "key_dir:=$LOGS/keys"); PGIDS+=("$G"); G_SERVER=$G
 G=$(start_in "$NS_S" "$ADDR_S" "$LOGS/monitor_server.log" "$PY" "$ROOT/scripts/ros_netns_monitor.py" server \
   --out "$LOGS/server_state.json"); PGIDS+=("$G")
 G=$(start_in "$NS_A" "$ADDR_A" "$LOGS/monitor_agent.log" "$PY" "$ROOT/scripts/ros_netns_monitor.py" agent \
@@ -216,7 +218,7 @@ wait_file "$LOGS/server_state.json" '"status": {' 60 ||
 start_agent() {  # start_agent <log> <clear_spool>
   start_in "$NS_A" "$ADDR_A" "$1" roslaunch --wait "$ROOT/hermes_agent/launch/agent.launch" \
     "robot:=$ROBOT" "dataset:=$DATA" "rate:=$RATE" "start_delay:=2.0" "spool_dir:=$SPOOL" \
-    "clear_spool:=$2" "config:=$LOGS/config.yaml"
+    "clear_spool:=$2" "config:=$LOGS/config.yaml" "key_file:=$LOGS/keys/$ROBOT.key"
 }
 died() { grep -c "process has died" "$1" 2>/dev/null || true; }
 at() {  # at <seconds after T0 (the first submap)>

@@ -32,10 +32,12 @@ set -u
 export DISPLAY=:77
 Xvfb :77 -screen 0 1280x800x24 -nolisten tcp >/dev/null 2>&1 &
 XPID=$!
-trap 'kill $LPID 2>/dev/null || true; wait $LPID 2>/dev/null || true; kill $XPID 2>/dev/null || true' EXIT
+trap 'kill $LPID 2>/dev/null || true; wait $LPID 2>/dev/null || true; kill $XPID 2>/dev/null || true; rm -rf "${KEYS:-}"' EXIT
 sleep 1
+KEYS="$(mktemp -d /tmp/hermes_rviz_keys.XXXXXX)"  # authenticated like a deployment, throw-away keys
+for robot in agent0 agent1 agent2; do "$ROOT/scripts/keys.sh" add "$robot" --dir "$KEYS" >/dev/null; done
 echo "[rviz] running server + 3 agents + rviz for ${WAIT} s"
-roslaunch hermes_agent demo.launch data:="$DATA" rviz:=true rate:=$RATE >/tmp/hermes_rviz_launch.log 2>&1 &
+roslaunch hermes_agent demo.launch data:="$DATA" rviz:=true rate:=$RATE key_dir:="$KEYS" >/tmp/hermes_rviz_launch.log 2>&1 &
 LPID=$!
 sleep "$WAIT"
 import -window root "$OUT"

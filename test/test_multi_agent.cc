@@ -1,7 +1,8 @@
 // rostest: three agents (DatasetPlayer + Agent nodelets) and hermes_server_node
 // over real ROS topics on rendered data. Checks that every submap an agent sent
 // was accepted exactly once, that all three maps merged into one frame, and the
-// merged keyframe paths against the rendered ground truth.
+// merged keyframe paths against the rendered ground truth; with authentication
+// on, as the launch files have it, and unauthenticated frames refused.
 #include <gtest/gtest.h>
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
@@ -21,6 +22,9 @@
 
 #include "hermes/core/dataset.h"
 #include "hermes/core/evaluation.h"
+#include "hermes/core/frame_auth.h"
+#include "hermes/core/wire_format.h"
+#include "hermes/core/wire_synthetic.h"
 
 namespace {
 
@@ -177,4 +181,70 @@ int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
   ros::init(argc, argv, "test_multi_agent");
   return RUN_ALL_TESTS();
+}
+
+// The deployment authenticates (multi_agent.test turns it on as the launch
+// files do): frames without a tag, with a wrong key's tag or from a robot
+// without a key are refused with their reason code, while the agents above
+// were accepted.
+TEST(MultiAgent, UnauthenticatedFramesAreRefusedWithReasons) {
+  ros::NodeHandle nh;
+  std::mutex mu;
+  std::map<std::uint64_t, hermes_msgs::SubmapAck> acks;
+  auto sub = nh.subscribe<hermes_msgs::SubmapAck>(
+      "/hermes/submap_ack", 100, [&](const hermes_msgs::SubmapAckConstPtr& a) {
+        std::lock_guard<std::mutex> l(mu);
+        if (a->seq >= 900000) acks[a->seq] = *a;
+      });
+  auto pub = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 10);
+  ros::AsyncSpinner spinner(1);
+  spinner.start();
+  const ros::WallTime connect_deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  while ((pub.getNumSubscribers() == 0 || sub.getNumPublishers() == 0) &&
+         ros::WallTime::now() < connect_deadline)
+    ros::WallDuration(0.1).sleep();
+  ASSERT_GT(pub.getNumSubscribers(), 0u) << "the server does not listen on /hermes/submap";
+  ros::WallDuration(0.5).sleep();
+
+  hermes::FrameKey stranger_key;
+  stranger_key.bytes.fill(0x42);
+  auto frame = [&](const std::string& robot, std::uint64_t seq, const hermes::FrameKey* key) {
+    hermes::SyntheticSubmapOptions opt;
+    opt.keyframes = 2;
+    opt.keypoints_per_keyframe = 30;
+    opt.landmarks = 20;
+    hermes::Submap s = hermes::makeSyntheticSubmap(opt);
+    s.header.agent = hermes::agentUuid(robot);
+    s.header.seq = seq;
+    auto f = hermes::encodeSubmap(s);
+    EXPECT_TRUE(f.ok());
+    if (key) f = hermes::signFrame(*f, *key);
+    hermes_msgs::EncodedSubmap m;
+    m.header.stamp = ros::Time::now();
+    m.agent_uuid = hermes::toString(s.header.agent);
+    m.session = s.header.session;
+    m.seq = seq;
+    m.data = *f;
+    return m;
+  };
+  pub.publish(frame("agent0", 900001, nullptr));        // no tag
+  pub.publish(frame("agent0", 900002, &stranger_key));  // not agent0's key
+  pub.publish(frame("intruder", 900003, &stranger_key));  // no key for this robot
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (ros::WallTime::now() < deadline) {
+    ros::WallDuration(0.1).sleep();
+    std::lock_guard<std::mutex> l(mu);
+    if (acks.size() == 3) break;
+  }
+  std::lock_guard<std::mutex> l(mu);
+  ASSERT_EQ(acks.size(), 3u) << "not every forged frame was answered";
+  const std::map<std::uint64_t, std::uint8_t> expected = {
+      {900001, hermes_msgs::SubmapAck::REASON_MISSING_TAG},
+      {900002, hermes_msgs::SubmapAck::REASON_BAD_TAG},
+      {900003, hermes_msgs::SubmapAck::REASON_UNKNOWN_ROBOT}};
+  for (const auto& [seq, code] : expected) {
+    EXPECT_EQ(acks[seq].status, hermes_msgs::SubmapAck::REJECTED) << seq;
+    EXPECT_EQ(acks[seq].reason_code, code) << seq << ": " << acks[seq].reason;
+    EXPECT_FALSE(acks[seq].reason.empty());
+  }
 }

@@ -30,7 +30,10 @@
 // /tmp/hermes_spool/<robot>), clear_spool (false: unacked submaps of a
 // previous run are resent), parallel (true: local BA and the window step run
 // on the pipeline's worker threads, so tracking never waits for them; false:
-// inside the image callback, as the offline runner does). The uplink runs on
+// inside the image callback, as the offline runner does), auth (frames tagged
+// with the robot's key; default: uplink.auth.enabled, agent.launch sets true),
+// key_file (default: uplink.auth.key_file, ~/.config/hermes/keys/<robot>.key;
+// missing or not private: the nodelet does not start). The uplink runs on
 // wall time. Images are paired under one mutex, the pipeline's calls are made
 // under another (its uplink thread calls the transport, which only publishes).
 #include <hermes_msgs/AgentHeartbeat.h>
@@ -58,6 +61,7 @@
 #include "hermes/agent/camera_stream.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/dataset_feed.h"
+#include "hermes/core/frame_auth.h"
 #include "ros_convert.h"
 
 namespace hermes_agent {
@@ -123,6 +127,22 @@ class AgentNodelet : public nodelet::Nodelet {
     // callback as the offline runner does.
     pnh.param("parallel", params_.threads.parallel, true);
     pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
+    // Frame authentication: ~auth (launch default true) and ~key_file override
+    // uplink.auth.*; the key is checked now, not at the first frame.
+    pnh.param("auth", params_.uplink.auth.enabled, params_.uplink.auth.enabled);
+    if (std::string key_file; pnh.getParam("key_file", key_file) && !key_file.empty())
+      params_.uplink.auth.key_file = key_file;
+    if (params_.uplink.auth.enabled) {
+      const std::string path = params_.uplink.auth.keyFileFor(robot_);
+      if (auto key = hermes::readKeyFile(path); !key) {
+        NODELET_FATAL("Agent %s: %s (create it with ./hermes keys add %s, or launch with auth:=false)",
+                      robot_.c_str(), key.error().c_str(), robot_.c_str());
+        return;
+      }
+      NODELET_INFO("Agent %s: frames tagged with the key in %s", robot_.c_str(), path.c_str());
+    } else {
+      NODELET_WARN("Agent %s: frame authentication is OFF", robot_.c_str());
+    }
     bool clear_spool = false;  // tests and demos: start without the previous run's backlog
     pnh.param("clear_spool", clear_spool, clear_spool);
     if (clear_spool) {  // drop the backlog, keep the session counter (see discardPending)
@@ -374,9 +394,16 @@ class AgentNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mu_);
     if (!pipeline_ || a->agent_uuid != uuid_) return;
     if (a->status == hermes_msgs::SubmapAck::REJECTED) {
-      NODELET_ERROR_THROTTLE(2.0, "Agent %s: server rejected seq %lu: %s", robot_.c_str(),
-                             static_cast<unsigned long>(a->seq), a->reason.c_str());
-      return;  // kept in the spool; resent after the timeout
+      // Kept in the spool and resent after the timeout. A quota refusal is the
+      // server's back-pressure, not an error; the others (bad tag, unknown
+      // robot, ...) may also answer someone else's frame under this uuid.
+      if (a->reason_code == hermes_msgs::SubmapAck::REASON_QUOTA)
+        NODELET_INFO_THROTTLE(5.0, "Agent %s: server busy, seq %lu resent later: %s",
+                              robot_.c_str(), static_cast<unsigned long>(a->seq), a->reason.c_str());
+      else
+        NODELET_ERROR_THROTTLE(2.0, "Agent %s: server rejected seq %lu: %s", robot_.c_str(),
+                               static_cast<unsigned long>(a->seq), a->reason.c_str());
+      return;
     }
     if (Status s = pipeline_->onAck(a->session, a->seq, ros::WallTime::now().toSec()); !s)
       NODELET_WARN_THROTTLE(2.0, "Agent %s: %s", robot_.c_str(), s.error().c_str());

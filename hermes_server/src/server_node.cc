@@ -13,7 +13,9 @@
 // runs from a timer one submap per tick, so an ack waits at most one merge.
 // Params: ~config (YAML, default config/hermes.yaml of the source tree),
 // ~output_dir (written at shutdown: TUM trajectories, PLY, metrics.json),
-// ~process_period [s] (0.05).
+// ~process_period [s] (0.05), ~auth (bool: overrides server.auth.enabled;
+// server.launch sets true), ~key_dir (overrides server.auth.key_dir). With
+// authentication on, a missing or empty key directory stops the node.
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/SubmapAck.h>
@@ -50,6 +52,9 @@ hermes_msgs::SubmapAck makeAck(const hermes_msgs::EncodedSubmap& m, const hermes
     case hermes::ArrivalVerdict::kStale: ack.status = hermes_msgs::SubmapAck::DUPLICATE; break;
     case hermes::ArrivalVerdict::kRejected: ack.status = hermes_msgs::SubmapAck::REJECTED; break;
   }
+  static_assert(hermes_msgs::SubmapAck::REASON_REFUSED + 1 == hermes::kReceiveCodes,
+                "SubmapAck reason codes mirror hermes::ReceiveCode");
+  ack.reason_code = static_cast<std::uint8_t>(r.code);
   ack.reason = r.reason;
   return ack;
 }
@@ -255,7 +260,13 @@ int main(int argc, char** argv) {
   pnh.param("config", config_file, config_file);
   pnh.param("output_dir", output_dir, output_dir);
   pnh.param("process_period", period, period);
-  auto config = hermes::agent::loadRunConfig(config_file, {});
+  // ~auth / ~key_dir (launch arguments; on by default there) override the config.
+  std::vector<std::string> sets;
+  if (bool auth = false; pnh.getParam("auth", auth))
+    sets.push_back(std::string("server.auth.enabled=") + (auth ? "true" : "false"));
+  if (std::string key_dir; pnh.getParam("key_dir", key_dir) && !key_dir.empty())
+    sets.push_back("server.auth.key_dir=" + key_dir);
+  auto config = hermes::agent::loadRunConfig(config_file, sets);
   if (!config.ok()) {
     ROS_FATAL("hermes_server: %s", config.error().c_str());
     return 2;
@@ -275,7 +286,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   ServerNode node(std::move(*server), output_dir, period);
-  ROS_INFO("hermes_server: ready (config %s)", config_file.c_str());
+  const std::string auth = params.auth.enabled ? "on, keys in " + params.auth.key_dir : "OFF";
+  ROS_INFO("hermes_server: ready (config %s; authentication %s)", config_file.c_str(), auth.c_str());
   ros::spin();
   node.finish();
   return 0;

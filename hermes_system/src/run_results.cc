@@ -164,6 +164,7 @@ RunResults evaluateRun(const OfflineRun& run) {
   m.loops_accepted = sm.loops_accepted;
   m.loops_rejected = sm.loops_rejected;
   m.agents_merged = sm.agents_merged;
+  m.frames_refused = sm.frames_refused;
   TimingStats timings = srv.timings();
   const eval::EvalParams& ep = run.params().run.eval;
   std::vector<eval::AgentTrajectories> merged;
@@ -174,9 +175,11 @@ RunResults evaluateRun(const OfflineRun& run) {
     am.bytes = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
     bytes_total += *am.bytes;
     am.submaps_applied = 0;
-    if (a.robot)
+    if (a.robot) {
       if (const AgentStats* st = srv.bookkeeper().stats(*a.robot))
         am.submaps_applied = static_cast<std::int64_t>(st->submaps_applied);
+      server::fillHeldLoad(srv, *a.robot, &am);
+    }
     const Trajectory& gt = a.dataset->info().groundtruth;
     if (!gt.empty() && !a.pipeline->trajectory().empty()) {
       auto ev = eval::evaluateTrajectory(gt, a.pipeline->trajectory(), ep, a.name);

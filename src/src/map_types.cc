@@ -1,6 +1,7 @@
 #include "hermes/core/map_types.h"
 
 #include <cstring>
+#include <functional>
 #include <cstdio>
 #include <random>
 #include <sstream>
@@ -45,6 +46,8 @@ Uuid uuidFromSeed(std::uint64_t seed) {
   for (auto& b : id) b = static_cast<std::uint8_t>(rng() & 0xff);
   return id;
 }
+
+Uuid agentUuid(const std::string& name) { return uuidFromSeed(std::hash<std::string>{}(name)); }
 
 // Debian builds for baseline x86-64, which has no POPCNT instruction: without a
 // clone __builtin_popcountll becomes a libgcc table loop (7 % of a whole run).

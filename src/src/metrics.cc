@@ -80,6 +80,9 @@ void to_json(json& j, const AgentMetrics& m) {
   if (m.matched_poses) j["matched_poses"] = *m.matched_poses;
   if (m.unmatched_poses) j["unmatched_poses"] = *m.unmatched_poses;
   if (m.scale) j["scale"] = *m.scale;
+  if (m.held_submaps) j["held_submaps"] = *m.held_submaps;
+  if (m.held_bytes) j["held_bytes"] = *m.held_bytes;
+  if (m.held_bytes_peak) j["held_bytes_peak"] = *m.held_bytes_peak;
 }
 
 void to_json(json& j, const RunMetrics& m) {
@@ -113,6 +116,7 @@ void to_json(json& j, const RunMetrics& m) {
   if (m.max_dt_s) j["max_dt_s"] = *m.max_dt_s;
   if (m.rpe_delta) j["rpe_delta"] = *m.rpe_delta;
   if (m.rpe_delta_unit) j["rpe_delta_unit"] = *m.rpe_delta_unit;
+  if (!m.frames_refused.empty()) j["frames_refused"] = m.frames_refused;
 }
 
 // ---------------------------------------------------------------- reading
@@ -230,6 +234,9 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.matched_poses = r.integer("matched_poses", false);
   a.unmatched_poses = r.integer("unmatched_poses", false);
   a.scale = r.number("scale", false);
+  a.held_submaps = r.integer("held_submaps", false);
+  a.held_bytes = r.integer("held_bytes", false);
+  a.held_bytes_peak = r.integer("held_bytes_peak", false);
   return a;
 }
 
@@ -276,6 +283,14 @@ RunMetrics parseRun(const json& j) {
   m.max_dt_s = r.number("max_dt_s", false);
   m.rpe_delta = r.number("rpe_delta", false);
   m.rpe_delta_unit = r.string("rpe_delta_unit", false);
+  if (const json* refused = r.get("frames_refused", false); refused && !refused->is_null()) {
+    ObjectReader fr(*refused, "frames_refused");
+    for (const auto& [reason, v] : refused->items()) {
+      auto n = fr.integer(reason, true);
+      if (!n) throw FieldError("field 'frames_refused." + reason + "' must be an integer, got null");
+      m.frames_refused[reason] = *n;
+    }
+  }
   return m;
 }
 

@@ -102,7 +102,7 @@ Expected<FrameHeader> parseFrameHeader(const std::uint8_t* data, std::size_t siz
   if (h.version != kWireVersion)
     return Error{"wire: version " + std::to_string(h.version) + " not supported (this build reads " +
                  std::to_string(kWireVersion) + ")"};
-  if (h.flags & ~kWireFlagZstd) return Error{"wire: unknown flags " + hex32(h.flags)};
+  if (h.flags & ~(kWireFlagZstd | kWireFlagTag)) return Error{"wire: unknown flags " + hex32(h.flags)};
   if (h.frameBytes() > limits.max_frame_bytes)
     return Error{"wire: frame of " + std::to_string(h.frameBytes()) +
                  " bytes exceeds the limit of " + std::to_string(limits.max_frame_bytes)};

@@ -21,6 +21,7 @@
 #include <string>
 
 #include "hermes/core/crc32.h"
+#include "hermes/core/frame_auth.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/core/wire_synthetic.h"
 
@@ -195,7 +196,9 @@ TEST(WireFuzz, MutatedFramesFailCleanlyOrDecodeValid) {
   std::mt19937_64 rng(seed);
 
   // Seed corpus: empty, tiny, small with random ids, a few cameras.
-  std::vector<Frame> plain, packed;
+  std::vector<Frame> plain, packed, tagged;  // tagged: authenticated (frame_auth.h)
+  FrameKey key;
+  for (std::size_t i = 0; i < key.bytes.size(); ++i) key.bytes[i] = static_cast<std::uint8_t>(7 * i + 1);
   std::vector<Frame> bodies;
   Submap empty;
   std::vector<Submap> seeds = {empty};
@@ -219,6 +222,11 @@ TEST(WireFuzz, MutatedFramesFailCleanlyOrDecodeValid) {
     auto fz = encodeSubmap(s, z);
     ASSERT_TRUE(fz.ok()) << fz.error();
     packed.push_back(fz.value());
+    for (const Frame* unsigned_frame : {&plain.back(), &packed.back()}) {
+      auto t = signFrame(*unsigned_frame, key);
+      ASSERT_TRUE(t.ok()) << t.error();
+      tagged.push_back(std::move(*t));
+    }
   }
 
   const DecodeLimits limits;
@@ -235,8 +243,12 @@ TEST(WireFuzz, MutatedFramesFailCleanlyOrDecodeValid) {
     Frame f;
     const unsigned mode = rng() % 100;
     if (mode < 15) {  // raw frame mutation, CRC left stale (header fields too)
-      f = rng() % 2 ? plain[a] : packed[a];
-      mutate(&f, 0, rng() % 2 ? plain[b] : packed[b], rng);
+      const auto pick = [&](std::size_t i) -> const Frame& {
+        const unsigned k = rng() % 3;
+        return k == 0 ? plain[i] : k == 1 ? packed[i] : tagged[2 * i + rng() % 2];
+      };
+      f = pick(a);
+      mutate(&f, 0, pick(b), rng);
     } else if (mode < 80) {  // body mutation, resealed uncompressed
       Frame body = bodies[a];
       mutate(&body, 0, bodies[b], rng);

@@ -48,7 +48,7 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
       distiller_(std::move(distiller)),
       monitor_(params.uplink.monitor) {
   // Agent identity in the window headers: a stable id from the agent's name.
-  agent_id_ = uuidFromSeed(std::hash<std::string>{}(name));
+  agent_id_ = agentUuid(name);
   setWindowIdentity(tracker_, agent_id_, session_);
   window_s_ = params.distill.window_s;
   startWorkers(params.threads.parallel);
@@ -107,7 +107,7 @@ Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clo
   if (uplink_) return Error{"agent " + name_ + ": uplink already attached"};
   if (frames_ > 0) return Error{"agent " + name_ + ": attach the uplink before the first frame"};
   if (!std::isfinite(clock_offset_s)) return Error{"agent " + name_ + ": non-finite clock offset"};
-  auto sender = UplinkSender::create(params_.uplink, std::move(transport));
+  auto sender = UplinkSender::create(params_.uplink, std::move(transport), name_);
   if (!sender.ok()) return Error{"agent " + name_ + ": uplink: " + sender.error()};
   auto session = sender->buffer().newSession();
   if (!session.ok()) return Error{"agent " + name_ + ": uplink: " + session.error()};

@@ -1,11 +1,25 @@
 #include "hermes/agent/uplink_sender.h"
 
+#include "hermes/core/keyring.h"
+#include "hermes/core/wire_format.h"
+
 namespace hermes::agent {
+
+std::string UplinkAuthParams::keyFileFor(const std::string& robot) const {
+  std::string path = key_file;
+  for (std::size_t at = path.find("{robot}"); at != std::string::npos;
+       at = path.find("{robot}", at + robot.size()))
+    path.replace(at, 7, robot);
+  return expandHome(path);
+}
 
 Status UplinkParams::read(const Config& c) {
   if (Status s = buffer.read(c); !s) return s;
   if (Status s = monitor.read(c); !s) return s;
-  if (Status s = c.get("uplink.max_in_flight_mbytes", &max_in_flight_mbytes); !s) return s;
+  for (Status s : {c.get("uplink.max_in_flight_mbytes", &max_in_flight_mbytes),
+                   c.get("uplink.auth.enabled", &auth.enabled),
+                   c.get("uplink.auth.key_file", &auth.key_file)})
+    if (!s) return s;
   return validate();
 }
 
@@ -13,6 +27,8 @@ Status UplinkParams::validate() const {
   if (Status s = buffer.validate(); !s) return s;
   if (Status s = monitor.validate(); !s) return s;
   if (!(max_in_flight_mbytes > 0)) return Error{"uplink.max_in_flight_mbytes must be > 0"};
+  if (auth.enabled && auth.key_file.empty())
+    return Error{"uplink.auth.key_file must name the robot's key file when uplink.auth.enabled"};
   return Status::Ok();
 }
 
@@ -20,16 +36,36 @@ void UplinkParams::write(ConfigWriter& w) const {
   buffer.write(w);
   monitor.write(w);
   w.set("uplink.max_in_flight_mbytes", max_in_flight_mbytes);
+  w.set("uplink.auth.enabled", auth.enabled);
+  w.set("uplink.auth.key_file", auth.key_file);
 }
 
-UplinkSender::UplinkSender(UplinkParams p, MapBuffer buffer, Transport transport)
-    : p_(std::move(p)), buffer_(std::move(buffer)), monitor_(p_.monitor), transport_(std::move(transport)) {}
+UplinkSender::UplinkSender(UplinkParams p, MapBuffer buffer, Transport transport,
+                           std::optional<FrameKey> key)
+    : p_(std::move(p)),
+      key_(key),
+      buffer_(std::move(buffer)),
+      monitor_(p_.monitor),
+      transport_(std::move(transport)) {}
 
-Expected<UplinkSender> UplinkSender::create(const UplinkParams& p, Transport transport) {
+Expected<UplinkSender> UplinkSender::create(const UplinkParams& p, Transport transport,
+                                            const std::string& robot) {
   if (Status s = p.validate(); !s) return Error{s.error()};
+  std::optional<FrameKey> key;
+  if (p.auth.enabled) {
+    auto read = readKeyFile(p.auth.keyFileFor(robot));
+    if (!read) return Error{read.error() + " (uplink.auth.key_file)"};
+    key = *read;
+  }
   auto buffer = MapBuffer::open(p.buffer);
   if (!buffer) return Error{buffer.error()};
-  return UplinkSender(p, std::move(*buffer), std::move(transport));
+  return UplinkSender(p, std::move(*buffer), std::move(transport), key);
+}
+
+std::size_t UplinkSender::wireBytes(const std::vector<std::uint8_t>& frame) const {
+  if (!key_) return frame.size();
+  auto h = peekFrame(frame.data(), frame.size());
+  return h ? kWireFixedBytes + h->body_bytes + kWireTagBytes : frame.size();
 }
 
 Status UplinkSender::submit(std::uint32_t session, std::uint64_t seq,
@@ -68,15 +104,26 @@ void UplinkSender::poll(double now) {
       in_flight_.erase(it);
       ++stats_.resends;
     }
-    if (in_flight > 0 && static_cast<double>(in_flight + next->frame.size()) > cap) return;
+    const std::size_t bytes = wireBytes(next->frame);
+    if (in_flight > 0 && static_cast<double>(in_flight + bytes) > cap) return;
+    std::optional<std::vector<std::uint8_t>> tagged;
+    if (key_) {
+      // Only a spooled frame damaged on disk cannot be tagged: it goes out as it
+      // is and the server's answer (malformed) names the problem.
+      auto signed_frame = signFrame(next->frame, *key_);
+      if (signed_frame)
+        tagged = std::move(*signed_frame);
+      else
+        ++stats_.untagged;
+    }
     const std::uint64_t id = next_send_id_++;
     send_ids_[key] = id;
-    in_flight_[key] = next->frame.size();
-    monitor_.onSend(id, next->frame.size(), now);
+    in_flight_[key] = bytes;
+    monitor_.onSend(id, bytes, now);
     buffer_.markSent(next->session, next->seq, now);
     ++stats_.sends;
-    stats_.bytes_sent += next->frame.size();
-    transport_(next->session, next->seq, next->frame);
+    stats_.bytes_sent += bytes;
+    transport_(next->session, next->seq, tagged ? *tagged : next->frame);
   }
 }
 

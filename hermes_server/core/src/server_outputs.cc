@@ -102,6 +102,13 @@ Expected<std::vector<Vec3>> readPly(const std::string& path) {
   return points;
 }
 
+void fillHeldLoad(const Server& server, RobotId robot, AgentMetrics* metrics) {
+  const HeldLoad* held = server.heldLoad(robot);
+  metrics->held_submaps = static_cast<int64_t>(held ? held->submaps : 0);
+  metrics->held_bytes = static_cast<int64_t>(held ? held->bytes : 0);
+  metrics->held_bytes_peak = static_cast<int64_t>(held ? held->peak_bytes : 0);
+}
+
 RunMetrics serverMetrics(const Server& server) {
   RunMetrics m;
   const MapManager& mm = server.mapManager();
@@ -120,10 +127,17 @@ RunMetrics serverMetrics(const Server& server) {
     a.landmarks = static_cast<int64_t>(s->landmarks);
     a.bytes = static_cast<int64_t>(s->bytes_received);
     a.submaps_applied = static_cast<int64_t>(s->submaps_applied);
+    fillHeldLoad(server, r, &a);
     bytes += a.bytes.value_or(0);
     m.per_agent.push_back(a);
   }
   m.bytes_total = bytes;
+  const ReceiverStats& rs = server.receiverStats();
+  for (std::size_t c = 0; c < kReceiveCodes; ++c) {
+    const auto code = static_cast<ReceiveCode>(c);
+    if (code != ReceiveCode::kAccepted && rs.by_code[c] > 0)
+      m.frames_refused[toString(code)] = static_cast<int64_t>(rs.by_code[c]);
+  }
   return m;
 }
 

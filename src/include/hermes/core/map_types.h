@@ -24,6 +24,9 @@ std::string toString(const Uuid& id);
 bool parseUuid(const std::string& text, Uuid* out);
 /// Deterministic uuid from a seed (tests, simulations).
 Uuid uuidFromSeed(std::uint64_t seed);
+/// The uuid of the agent named `name` (the robot name; AgentPipeline's identity,
+/// and how a server's key directory maps `<name>.key` to a uuid).
+Uuid agentUuid(const std::string& name);
 
 /// A 256-bit ORB descriptor.
 using Descriptor = std::array<std::uint8_t, 32>;

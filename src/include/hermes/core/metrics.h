@@ -69,6 +69,9 @@ struct AgentMetrics {
   std::optional<double> rpe_trans_rmse_m, rpe_rot_rmse_deg;
   std::optional<int64_t> matched_poses, unmatched_poses;
   std::optional<double> scale;                  ///< sim3 only
+  std::optional<int64_t> held_submaps;          ///< server: submaps waiting to be merged now
+  std::optional<int64_t> held_bytes;            ///< server: their frame bytes now [B]
+  std::optional<int64_t> held_bytes_peak;       ///< server: the most ever held at once [B]
 };
 
 struct RunMetrics {
@@ -87,6 +90,8 @@ struct RunMetrics {
   std::optional<int64_t> matched_poses, unmatched_poses;
   std::optional<double> max_dt_s, rpe_delta;
   std::optional<std::string> rpe_delta_unit;  ///< "s" | "frames"
+  /// Server: frames not accepted, by reason ("bad_tag", "quota", ...); omitted when none.
+  std::map<std::string, int64_t> frames_refused;
 };
 
 void to_json(nlohmann::json& j, const RunMetrics& m);

@@ -8,16 +8,23 @@
 //   ------ ----  -------------------------------------------------------------
 //        0    4  magic "HRMS"
 //        4    2  format version (this build writes and reads kWireVersion)
-//        6    2  flags: bit 0 = body is zstd-compressed; other bits must be 0
+//        6    2  flags: bit 0 = body is zstd-compressed; bit 1 = a 32-byte
+//                authentication tag follows the body (frame_auth.h); other
+//                bits must be 0 (decoders before the tag existed reject a
+//                tagged frame with "unknown flags 0x00000002")
 //        8    4  body length in bytes, as stored (after compression)
 //       12    4  raw body length (before compression; == body length if not)
-//       16    4  CRC-32 (IEEE 802.3) over bytes [0,16) then [20, end of frame)
+//       16    4  CRC-32 (IEEE 802.3) over bytes [0,16) then [20, end of frame),
+//                the tag included
 //       20   44  routing header, never compressed, so a receiver can route,
 //                deduplicate and acknowledge without decoding (peekFrame):
 //                  agent uuid (16 bytes), session u32, seq u64,
 //                  t_start f64, t_end f64
 //       64    n  body: the submap, written with cereal's PortableBinaryOutputArchive
 //                (little-endian) and optionally zstd-compressed as one zstd frame
+//   64+n   32  (flag bit 1 only) HMAC-SHA256 tag with the robot's key over bytes
+//                [0,16) then [20, 64+n): every header field but the CRC, and the
+//                body (frame_auth.h). The decoder skips it; receivers verify it.
 //
 // Body (v2; v1 had no keyframe flags byte). "vu" is an unsigned LEB128 varint (canonical: no redundant trailing
 // 0x80 groups), "vz" a zigzag varint of the difference to the previous id:
@@ -74,6 +81,8 @@ constexpr std::size_t kWireRoutingHeaderBytes = 44;  ///< uuid, session, seq, t_
 constexpr std::size_t kWireFixedBytes = kWireFrameHeaderBytes + kWireRoutingHeaderBytes;
 constexpr std::size_t kWireCrcOffset = 16;
 constexpr std::uint16_t kWireFlagZstd = 1u << 0;
+constexpr std::uint16_t kWireFlagTag = 1u << 1;   ///< an authentication tag trails the body
+constexpr std::size_t kWireTagBytes = 32;         ///< HMAC-SHA256
 
 struct WireOptions {
   bool zstd = false;   ///< compress the body with zstd
@@ -94,7 +103,9 @@ struct FrameHeader {
   std::uint32_t crc = 0;
   SubmapHeader routing;          ///< agent, session, seq, t_start, t_end
   bool compressed() const { return (flags & kWireFlagZstd) != 0; }
-  std::size_t frameBytes() const { return kWireFixedBytes + body_bytes; }
+  bool tagged() const { return (flags & kWireFlagTag) != 0; }
+  std::size_t tagBytes() const { return tagged() ? kWireTagBytes : 0; }
+  std::size_t frameBytes() const { return kWireFixedBytes + body_bytes + tagBytes(); }
 };
 
 /// Exact byte accounting of an encoding, before compression. The parts add up to

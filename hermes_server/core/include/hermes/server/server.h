@@ -6,10 +6,13 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "hermes/core/config.h"
+#include "hermes/core/keyring.h"
 #include "hermes/core/metrics.h"
+#include "hermes/server/admission.h"
 #include "hermes/server/bookkeeper.h"
 #include "hermes/server/credibility.h"
 #include "hermes/server/map_manager.h"
@@ -22,6 +25,8 @@ struct ServerParams {
   BookkeeperParams bookkeeper;    ///< server.bookkeeper.*
   CredibilityParams credibility;  ///< server.csa, server.w_ts, ...
   MapManagerParams map;           ///< server.place_recognition.*, server.loop_closure.*, ...
+  AuthParams auth;                ///< server.auth.*
+  QueueParams queue;              ///< server.queue.*
   Status read(const Config& config, const std::string& prefix = "server.");
   Status validate() const;
   void write(ConfigWriter& out, const std::string& prefix = "server.") const;
@@ -38,10 +43,15 @@ struct ServerCounters {
 
 class Server {
  public:
-  /// Loads the vocabulary (relative paths resolved against base_dir).
+  /// Loads the vocabulary (relative paths resolved against base_dir) and, with
+  /// params.auth.enabled, the keyring: `keyring` when given, else the key
+  /// directory params.auth.key_dir ("~/" expanded).
   static Expected<std::unique_ptr<Server>> create(const ServerParams& params,
-                                                  const std::string& base_dir);
-  Server(const ServerParams& params, std::shared_ptr<const Vocabulary> vocabulary);
+                                                  const std::string& base_dir,
+                                                  std::optional<Keyring> keyring = std::nullopt);
+  /// `keyring` is required exactly when params.auth.enabled (checked).
+  Server(const ServerParams& params, std::shared_ptr<const Vocabulary> vocabulary,
+         std::optional<Keyring> keyring = std::nullopt);
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
 
@@ -59,6 +69,8 @@ class Server {
   MapManager& mapManager() { return map_; }
   const GlobalMap& map() const { return map_.map(); }
   const ReceiverStats& receiverStats() const { return receiver_.stats(); }
+  /// What the server holds for a robot awaiting merge (nullptr: nothing ever).
+  const HeldLoad* heldLoad(RobotId robot) const { return quotas_.load(robot); }
   const ServerCounters& counters() const { return counters_; }
   /// Map-manager stages plus "submap" (whole merge incl. queue handling) [ms].
   TimingStats timings() const;
@@ -66,6 +78,8 @@ class Server {
 
  private:
   ServerParams params_;
+  std::optional<Keyring> keyring_;
+  RobotQuotas quotas_;
   Bookkeeper bookkeeper_;
   CredibilityAssessor queue_;
   MapManager map_;

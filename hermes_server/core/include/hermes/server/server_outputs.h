@@ -28,8 +28,13 @@ Status writePly(const std::string& path, const std::vector<Vec3>& points, bool b
 /// Reads back what writePly wrote (either format).
 Expected<std::vector<Vec3>> readPly(const std::string& path);
 
+/// What the server holds for `robot` awaiting merge, into the agent's metrics
+/// (held_submaps, held_bytes, held_bytes_peak; zeros when nothing ever was).
+void fillHeldLoad(const Server& server, RobotId robot, AgentMetrics* metrics);
+
 /// The server's share of the metrics JSON: loops_accepted, loops_rejected,
-/// agents_merged, timings_ms; per_agent with keyframes/landmarks/bytes/submaps.
+/// agents_merged, timings_ms, frames_refused; per_agent with keyframes/landmarks/
+/// bytes/submaps and the held load.
 RunMetrics serverMetrics(const Server& server);
 
 }  // namespace server

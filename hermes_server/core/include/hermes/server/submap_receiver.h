@@ -1,15 +1,23 @@
 // Server side of exactly-once delivery: checks and decodes an incoming frame,
 // asks the bookkeeper whether it is new, hands each accepted submap exactly once
 // to the sink (the credibility queue / map manager) and says how to acknowledge.
-// Malformed, oversized, wrong-version or unknown-agent frames are rejected with
-// a reason and never disturb other agents. Transport-agnostic: the ROS node and
-// the offline runner both call receive().
+// Malformed, oversized, wrong-version, unauthenticated or unknown-agent frames
+// are rejected with a reason code and text and never disturb other agents.
+// Transport-agnostic: the ROS node and the offline runner both call receive().
+//
+// Order of the checks (admission.h has the policy): frame header and CRC
+// (peekFrame) → routing claimed by the transport → with a keyring: robot known,
+// tag present, tag valid (nothing unauthenticated goes further) → already
+// accepted (replay / resend: acknowledged, not decoded) → the robot's quota
+// (refused without ack: the robot resends later) → decode → bookkeeper.
 #pragma once
 
+#include <array>
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "hermes/core/keyring.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/server/bookkeeper.h"
 
@@ -22,8 +30,28 @@ struct ReceivedSubmap {
   double arrival_time = 0;
 };
 
+/// What became of a frame; sent in the acknowledgement (SubmapAck.reason_code
+/// has the same numbers) and counted per code.
+enum class ReceiveCode : std::uint8_t {
+  kAccepted = 0,
+  kReplay = 1,           ///< (session, seq) already accepted: acknowledged again, not applied
+  kStale = 2,            ///< a superseded session's late submap: acknowledged, not applied
+  kMalformed = 3,        ///< not a readable frame or submap (the text says what, where)
+  kRoutingMismatch = 4,  ///< the transport's uuid/session/seq disagree with the frame's
+  kUnknownRobot = 5,     ///< authentication on, and no key for the frame's uuid
+  kMissingTag = 6,       ///< authentication on, and the frame carries no tag
+  kBadTag = 7,           ///< the tag is not the robot's key's for these bytes (forged, altered)
+  kQuota = 8,            ///< the robot's queue or byte quota is full: not acknowledged, resend later
+  kRefused = 9,          ///< the bookkeeper refused it (unregistered agent, nil uuid)
+};
+constexpr std::size_t kReceiveCodes = 10;
+/// "accepted", "replay", "stale", "malformed", "routing_mismatch", "unknown_robot",
+/// "missing_tag", "bad_tag", "quota", "refused".
+const char* toString(ReceiveCode code);
+
 struct ReceiveResult {
   ArrivalVerdict verdict = ArrivalVerdict::kRejected;
+  ReceiveCode code = ReceiveCode::kMalformed;
   bool acknowledge = false;
   RobotId robot = 0;
   SubmapHeader routing;  ///< from the frame when it could be read
@@ -33,12 +61,24 @@ struct ReceiveResult {
 struct ReceiverStats {
   std::size_t frames = 0, accepted = 0, duplicates = 0, stale = 0, rejected = 0;
   std::size_t bytes = 0;
+  std::array<std::size_t, kReceiveCodes> by_code{};  ///< frames per ReceiveCode
+  std::size_t count(ReceiveCode c) const { return by_code[static_cast<std::size_t>(c)]; }
+};
+
+/// Optional gates in front of the decoder (admission.h).
+struct ReceiverGuards {
+  /// Non-null: frames must carry a valid tag of a robot in the keyring.
+  const Keyring* keyring = nullptr;
+  /// Set: asked before decoding a new submap of a known robot; a non-empty
+  /// answer refuses it with ReceiveCode::kQuota and that text.
+  std::function<std::string(RobotId, std::size_t bytes)> quota;
 };
 
 class SubmapReceiver {
  public:
   using Sink = std::function<void(ReceivedSubmap&&)>;
-  SubmapReceiver(Bookkeeper* bookkeeper, Sink sink, DecodeLimits limits = {});
+  SubmapReceiver(Bookkeeper* bookkeeper, Sink sink, DecodeLimits limits = {},
+                 ReceiverGuards guards = {});
 
   /// `claimed` is what the transport says about the frame (e.g. the ROS message
   /// fields); it must match the frame's own routing header.
@@ -47,9 +87,15 @@ class SubmapReceiver {
   const ReceiverStats& stats() const { return stats_; }
 
  private:
+  /// The tag check; empty when the frame may go on, else why it may not.
+  std::string authenticate(const std::uint8_t* data, std::size_t size, const Uuid& agent,
+                           ReceiveCode* code) const;
+  ReceiveResult& finish(ReceiveResult& r);
+
   Bookkeeper* bookkeeper_;
   Sink sink_;
   DecodeLimits limits_;
+  ReceiverGuards guards_;
   ReceiverStats stats_;
 };
 
