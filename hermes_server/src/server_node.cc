@@ -247,7 +247,7 @@ class ServerNode {
   ros::Subscriber submap_sub_, hb_sub_;
   ros::WallTimer process_timer_, publish_timer_;
   tf2_ros::TransformBroadcaster tf_;
-  bool dirty_ = false;
+  bool dirty_ = true;  ///< the map changed since it was last published (a resumed server holds one)
 };
 
 }  // namespace
