@@ -46,6 +46,7 @@ fi
 WORK="$(mktemp -d /tmp/hermes_bench_realtime.XXXXXX)"
 [[ "$KEEP" == 1 ]] || trap 'rm -rf "$WORK"' EXIT
 TIMEOUT=$((DURATION * 3 + 60))
+"$ROOT/scripts/keys.sh" add R --dir "$WORK/keys" >/dev/null  # a throw-away key: frames tagged as on a robot
 
 # run_one NAME CAMERA MODE BAG DATA IMAGE_TOPIC
 run_one() {
@@ -58,6 +59,7 @@ run_one() {
     <arg name="mode" value="$mode"/>
     <arg name="clear_spool" value="true"/>
     <arg name="spool_dir" value="$WORK/spool_$name"/>
+    <arg name="key_file" value="$WORK/keys/R.key"/>
   </include>
   <node pkg="rosbag" type="play" name="play" args="--wait-for-subscribers -d 1 $bag" required="false"/>
   <test test-name="$name" pkg="hermes_tests" type="test_bag_input" time-limit="$((TIMEOUT + 30)).0">

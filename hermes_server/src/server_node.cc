@@ -16,6 +16,10 @@
 // ~process_period [s] (0.05), ~auth (bool: overrides server.auth.enabled;
 // server.launch sets true), ~key_dir (overrides server.auth.key_dir). With
 // authentication on, a missing or empty key directory stops the node.
+// ~checkpoint_dir (overrides server.checkpoint_dir: with a directory the server
+// journals every submap before acknowledging it, checkpoints after merges and
+// on shutdown, and resumes from it on start; the core does all of it, see
+// hermes/server/server.h).
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/SubmapAck.h>
@@ -117,6 +121,8 @@ class ServerNode {
     server_->process(ros::WallTime::now().toSec());
     if (auto s = server_->mapManager().optimize(); !s)
       ROS_WARN("hermes_server: final optimisation: %s", s.error().c_str());
+    if (auto s = server_->checkpoint(ros::WallTime::now().toSec()); !s)
+      ROS_ERROR("hermes_server: last checkpoint: %s", s.error().c_str());
     if (output_dir_.empty()) return;
     std::error_code ec;
     std::filesystem::create_directories(output_dir_, ec);
@@ -247,7 +253,7 @@ class ServerNode {
   ros::Subscriber submap_sub_, hb_sub_;
   ros::WallTimer process_timer_, publish_timer_;
   tf2_ros::TransformBroadcaster tf_;
-  bool dirty_ = false;
+  bool dirty_ = true;  ///< the map changed since it was last published (a resumed server holds one)
 };
 
 }  // namespace
@@ -256,6 +262,7 @@ int main(int argc, char** argv) {
   ros::init(argc, argv, "hermes_server");
   ros::NodeHandle pnh("~");
   std::string config_file = std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", output_dir;
+  std::string checkpoint_dir;
   double period = 0.05;
   pnh.param("config", config_file, config_file);
   pnh.param("output_dir", output_dir, output_dir);
@@ -266,6 +273,7 @@ int main(int argc, char** argv) {
     sets.push_back(std::string("server.auth.enabled=") + (auth ? "true" : "false"));
   if (std::string key_dir; pnh.getParam("key_dir", key_dir) && !key_dir.empty())
     sets.push_back("server.auth.key_dir=" + key_dir);
+  pnh.param("checkpoint_dir", checkpoint_dir, checkpoint_dir);
   auto config = hermes::agent::loadRunConfig(config_file, sets);
   if (!config.ok()) {
     ROS_FATAL("hermes_server: %s", config.error().c_str());
@@ -276,6 +284,7 @@ int main(int argc, char** argv) {
     ROS_FATAL("hermes_server: %s (in %s)", s.error().c_str(), config_file.c_str());
     return 2;
   }
+  if (!checkpoint_dir.empty()) params.checkpoint.dir = checkpoint_dir;
   if (!(period > 0)) {
     ROS_FATAL("hermes_server: ~process_period must be > 0");
     return 2;
@@ -285,9 +294,19 @@ int main(int argc, char** argv) {
     ROS_FATAL("hermes_server: %s", server.error().c_str());
     return 2;
   }
+  const hermes::server::ResumeReport& resume = (*server)->resumeReport();
+  for (const std::string& p : resume.problems) ROS_WARN("hermes_server: %s", p.c_str());
+  if (resume.resumed)
+    ROS_INFO("hermes_server: resumed from %s (+%zu journalled submaps) in %.0f ms: %zu agents, "
+             "%zu submaps pending",
+             resume.checkpoint.empty() ? "the journal" : resume.checkpoint.c_str(),
+             resume.journal_replayed, resume.load_ms, (*server)->bookkeeper().robots().size(),
+             (*server)->pending());
   ServerNode node(std::move(*server), output_dir, period);
   const std::string auth = params.auth.enabled ? "on, keys in " + params.auth.key_dir : "OFF";
-  ROS_INFO("hermes_server: ready (config %s; authentication %s)", config_file.c_str(), auth.c_str());
+  ROS_INFO("hermes_server: ready (config %s; authentication %s%s%s)", config_file.c_str(),
+           auth.c_str(), params.checkpoint.enabled() ? "; checkpoints in " : "",
+           params.checkpoint.dir.c_str());
   ros::spin();
   node.finish();
   return 0;

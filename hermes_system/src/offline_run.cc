@@ -1,6 +1,7 @@
 #include "hermes/system/offline_run.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -21,9 +22,22 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
   if (agents.empty()) return Error{"no agent to run"};
   auto trace = params.link.makeTrace();
   if (!trace.ok()) return Error{trace.error()};
-  auto server = server::Server::create(params.server, base_dir);
+  std::unique_ptr<OfflineRun> run(new OfflineRun(params, nullptr));
+  run->base_dir_ = base_dir;
+  if (!params.clock.server_restart_at.empty() && !run->params_.server.checkpoint.enabled())
+    run->params_.server.checkpoint.dir =
+        (fs::path(spool_root).parent_path() / "server_checkpoint").string();
+  if (run->params_.server.checkpoint.enabled()) {  // a run starts fresh
+    std::error_code ec;
+    fs::remove_all(run->params_.server.checkpoint.dir, ec);
+    if (ec)
+      return Error{"cannot empty the server checkpoint directory " +
+                   run->params_.server.checkpoint.dir + ": " + ec.message()};
+  }
+  auto server = server::Server::create(run->params_.server, base_dir);
   if (!server.ok()) return Error{server.error()};
-  std::unique_ptr<OfflineRun> run(new OfflineRun(params, std::move(*server)));
+  run->server_ = std::move(*server);
+  std::sort(run->params_.clock.server_restart_at.begin(), run->params_.clock.server_restart_at.end());
   run->link_ = std::make_unique<SharedLink>(*trace, static_cast<int>(agents.size()),
                                             static_cast<std::uint64_t>(params.link.seed),
                                             static_cast<std::size_t>(params.link.packet_bytes));
@@ -62,6 +76,8 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
           m.payload = std::make_shared<const std::vector<std::uint8_t>>(frame);
           m.send_time = self->now_;
           self->messages_[m.id] = MessageKey{i, session, seq};
+          OfflineAgent& sender = self->agents_[i];
+          if (!sender.sent.insert({session, seq}).second) ++sender.resent;
           self->link_->send(std::move(m), self->now_);
         },
         a.clock_offset);
@@ -94,6 +110,10 @@ void OfflineRun::deliver(double t) {
       ++a.lost_messages;
       continue;
     }
+    if (!server_) {  // restarting: nobody receives it, the agent resends it
+      ++restarts_.back().frames_lost_down;
+      continue;
+    }
     SubmapHeader claimed;
     claimed.agent = a.pipeline->agentId();
     claimed.session = key.session;
@@ -102,6 +122,10 @@ void OfflineRun::deliver(double t) {
     const ReceiveResult r = server_->onFrame(bytes.data(), bytes.size(), &claimed, d.arrival_time);
     if (r.verdict == ArrivalVerdict::kAccept || r.verdict == ArrivalVerdict::kDuplicate)
       a.robot = r.robot;
+    if (r.verdict == ArrivalVerdict::kDuplicate) ++a.duplicates;
+    if (r.verdict == ArrivalVerdict::kAccept && !restarts_.empty() &&
+        restarts_.back().first_accept_s < 0)
+      restarts_.back().first_accept_s = d.arrival_time;
     if (!r.acknowledge) continue;
     const double ack = link_->ackArrival(d.arrival_time);
     if (ack >= 0) acks_.push_back(PendingAck{ack, key.agent, key.session, key.seq});
@@ -156,6 +180,41 @@ void OfflineRun::retryCarriedWindows(double t) {
   }
 }
 
+void OfflineRun::onServerCreated(std::function<void(server::Server&)> setup) {
+  server_setup_ = std::move(setup);
+  if (server_ && server_setup_) server_setup_(*server_);
+}
+
+Status OfflineRun::restartServer(double t) {
+  const std::vector<double>& at = params_.clock.server_restart_at;
+  if (server_ && next_restart_ < at.size() && t + 1e-9 >= at[next_restart_]) {
+    ++next_restart_;
+    ServerRestart r;
+    r.down_at_s = t;
+    for (const OfflineAgent& a : agents_) r.resends_before += a.resent;
+    restarts_.push_back(r);
+    server_.reset();  // a crash: no clean checkpoint
+    server_up_at_ = t + params_.clock.server_downtime_s;
+  }
+  if (server_ || t + 1e-9 < server_up_at_) return Status::Ok();
+  const auto t0 = std::chrono::steady_clock::now();
+  auto server = server::Server::create(params_.server, base_dir_);
+  if (!server) return Error{"server restart at " + std::to_string(t) + " s: " + server.error()};
+  server_ = std::move(*server);
+  ServerRestart& r = restarts_.back();
+  r.up_at_s = t;
+  r.resume_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  r.checkpoint = server_->resumeReport().checkpoint;
+  r.problems = server_->resumeReport().problems;
+  r.journal_replayed = server_->resumeReport().journal_replayed;
+  if (server_setup_) server_setup_(*server_);
+  // The robots see the server again (its acknowledgements resume) and resend
+  // everything it has not acknowledged.
+  for (OfflineAgent& a : agents_) a.pipeline->uplink()->onReconnect();
+  next_server_ = t + params_.clock.server_period_s;
+  return Status::Ok();
+}
+
 void OfflineRun::sample(double t) {
   const double period = params_.clock.sample_period_s;
   const LinkState st = link_->trace().at(next_sample_);
@@ -195,12 +254,13 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
   for (std::int64_t k = 0;; ++k) {
     const double t = double(k) * c.step_s;
     now_ = t;
+    if (Status s = restartServer(t); !s) return s;
     deliver(t);
     acknowledge(t);
     for (OfflineAgent& a : agents_) a.pipeline->pollUplink(t);
     if (Status s = feedDueFrames(t); !s) return s;
     retryCarriedWindows(t);
-    if (t + 1e-9 >= next_server_) {
+    if (server_ && t + 1e-9 >= next_server_) {
       server_->process(t);
       next_server_ += c.server_period_s;
     }
@@ -220,8 +280,8 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
       p.sim_end = end_frames;
       for (const OfflineAgent& a : agents_) p.frames_done += a.next;
       p.frames_total = total;
-      p.merged_submaps = static_cast<int>(server_->counters().merged);
-      p.agents_merged = server_->mapManager().agentsMerged();
+      p.merged_submaps = server_ ? static_cast<int>(server_->counters().merged) : 0;
+      p.agents_merged = server_ ? server_->mapManager().agentsMerged() : 0;
       p.draining = !frames_left;
       progress(p);
       next_progress = t + 1.0;
@@ -234,9 +294,14 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     sample(now_);
     next_sample_ += c.sample_period_s;
   }
+  if (!server_) {  // the run ended while the server was down: bring it back to finish
+    server_up_at_ = now_;
+    if (Status s = restartServer(now_); !s) return s;
+  }
   // Whatever arrived is merged, and the graph is optimised once more.
   server_->process(now_);
-  return server_->mapManager().optimize();
+  if (Status s = server_->mapManager().optimize(); !s) return s;
+  return server_->checkpoint(now_);  // clean shutdown (no-op without a checkpoint directory)
 }
 
 }  // namespace hermes::system

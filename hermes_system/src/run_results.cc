@@ -208,6 +208,7 @@ RunResults evaluateRun(const OfflineRun& run) {
     }
   }
   loopAccuracy(run, &res);
+  res.durability = summarizeDurability(run);
   return res;
 }
 
@@ -226,6 +227,7 @@ nlohmann::json resultsJson(const RunResults& res) {
   }
   j["loops_per_pair"] = res.loops_per_pair;
   if (!res.warnings.empty()) j["warnings"] = res.warnings;
+  if (res.durability) j.update(durabilityJson(*res.durability));
   return j;
 }
 
@@ -416,6 +418,7 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
                   l.p95_trans_m * 100, l.wrong);
     o << buf;
   }
+  if (res.durability) o << formatDurability(*res.durability);
   for (const std::string& w : res.warnings) o << "warning: " << w << '\n';
   return o.str();
 }

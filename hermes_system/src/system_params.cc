@@ -43,7 +43,9 @@ Expected<LinkTrace> LinkParams::makeTrace() const {
 Status ClockParams::read(const Config& c) {
   for (Status s : {c.get("system.step_s", &step_s), c.get("system.server_period_s", &server_period_s),
                    c.get("system.sample_period_s", &sample_period_s),
-                   c.get("system.drain_s", &drain_s)})
+                   c.get("system.drain_s", &drain_s),
+                   c.get("system.server_restart_at", &server_restart_at),
+                   c.get("system.server_downtime_s", &server_downtime_s)})
     if (!s) return s;
   return validate();
 }
@@ -53,6 +55,11 @@ Status ClockParams::validate() const {
   if (!(server_period_s >= step_s)) return Error{"system.server_period_s must be >= system.step_s"};
   if (!(sample_period_s >= step_s)) return Error{"system.sample_period_s must be >= system.step_s"};
   if (!(drain_s >= 0) || !std::isfinite(drain_s)) return Error{"system.drain_s must be >= 0"};
+  for (double t : server_restart_at)
+    if (!(t >= 0) || !std::isfinite(t))
+      return Error{"system.server_restart_at: every time must be >= 0 s, got " + std::to_string(t)};
+  if (!(server_downtime_s >= 0) || !std::isfinite(server_downtime_s))
+    return Error{"system.server_downtime_s must be >= 0"};
   return Status::Ok();
 }
 
@@ -61,6 +68,8 @@ void ClockParams::write(ConfigWriter& w) const {
   w.set("system.server_period_s", server_period_s);
   w.set("system.sample_period_s", sample_period_s);
   w.set("system.drain_s", drain_s);
+  w.set("system.server_restart_at", server_restart_at);
+  w.set("system.server_downtime_s", server_downtime_s);
 }
 
 Status SystemParams::read(const Config& config) {

@@ -10,7 +10,7 @@
 
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
-#include "support/rendered_hall.h"
+#include "support/hall_run.h"
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -25,19 +25,7 @@ system::SystemParams baseParams() {
 
 std::unique_ptr<system::OfflineRun> makeRun(const system::SystemParams& params,
                                             const std::string& tag) {
-  const std::string hall = test_support::renderedHall();
-  EXPECT_FALSE(hall.empty()) << "rendering failed";
-  std::vector<system::AgentSource> sources;
-  for (const std::string& s : test_support::hallSequences()) {
-    auto ds = Dataset::open(hall + "/" + s, params.run.dataset);
-    EXPECT_TRUE(ds.ok()) << ds.error();
-    if (!ds.ok()) return nullptr;
-    sources.push_back({s, std::move(*ds), 0});
-  }
-  const std::string spool = ::testing::TempDir() + "/hermes_offline_" + tag;
-  auto run = system::OfflineRun::create(params, std::move(sources), spool, HERMES_SOURCE_DIR);
-  EXPECT_TRUE(run.ok()) << run.error();
-  return run.ok() ? std::move(*run) : nullptr;
+  return test_support::makeHallRun(params, tag);
 }
 
 /// Every submap the agents handed to their uplink reached the map exactly once.

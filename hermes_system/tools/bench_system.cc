@@ -80,21 +80,23 @@ std::vector<std::string> variantSets(const std::string& v) {
 /// Replaces a `fraction` of the place candidates (seeded draw) by a random keyframe
 /// of another agent: what a poor place recogniser would propose.
 void injectFalseCandidates(system::OfflineRun& run, double fraction, std::size_t* injected) {
-  server::MapManager& mm = run.server().mapManager();
   auto rng = std::make_shared<std::mt19937_64>(7);
-  mm.setCandidateHook([&mm, rng, fraction, injected](const KeyframeKey& query,
-                                                     std::vector<PlaceCandidate>* c) {
-    std::uniform_real_distribution<double> u(0, 1);
-    for (PlaceCandidate& cand : *c) {
-      if (u(*rng) >= fraction) continue;
-      std::vector<KeyframeKey> others;
-      for (const auto& [id, traj] : mm.map().trajectories)
-        if (traj.agent != query.agent)
-          for (const auto& [kid, kf] : traj.keyframes) others.push_back({traj.agent, traj.session, kid});
-      if (others.empty()) continue;
-      cand.key = others[std::uniform_int_distribution<std::size_t>(0, others.size() - 1)(*rng)];
-      ++*injected;
-    }
+  run.onServerCreated([rng, fraction, injected](server::Server& srv) {  // again after a restart
+    server::MapManager& mm = srv.mapManager();
+    mm.setCandidateHook([&mm, rng, fraction, injected](const KeyframeKey& query,
+                                                       std::vector<PlaceCandidate>* c) {
+      std::uniform_real_distribution<double> u(0, 1);
+      for (PlaceCandidate& cand : *c) {
+        if (u(*rng) >= fraction) continue;
+        std::vector<KeyframeKey> others;
+        for (const auto& [id, traj] : mm.map().trajectories)
+          if (traj.agent != query.agent)
+            for (const auto& [kid, kf] : traj.keyframes) others.push_back({traj.agent, traj.session, kid});
+        if (others.empty()) continue;
+        cand.key = others[std::uniform_int_distribution<std::size_t>(0, others.size() - 1)(*rng)];
+        ++*injected;
+      }
+    });
   });
 }
 

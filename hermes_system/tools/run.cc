@@ -29,7 +29,7 @@ const char* kUsage =
     "usage: hermes_run --dataset DIR [--dataset DIR2 ...] --out DIR [--config FILE]\n"
     "                  [--set key=value ...] [--no-server]\n"
     "                  [--bandwidth MBITPS | --link-trace FILE] [--max-frames N]\n"
-    "                  [--no-plots] [--json] [--quiet]\n"
+    "                  [--server-restart-at S ...] [--no-plots] [--json] [--quiet]\n"
     "Runs one agent per dataset folder (EuRoC ASL stereo or TUM RGB-D layout). With the\n"
     "server (default), all agents and the edge server run in one process on a simulated\n"
     "clock; every agent's uplink crosses ONE shared link (--bandwidth: constant rate in\n"
@@ -51,6 +51,10 @@ const char* kUsage =
     "<agent> is the dataset folder's name. --config: YAML (default: built-in defaults,\n"
     "see config/hermes.yaml); --set overrides one key (unknown keys are an error).\n"
     "--no-server: one agent, tracking only. --max-frames: at most N frames per agent.\n"
+    "--server-restart-at S (repeatable): at simulated time S [s] the server is destroyed\n"
+    "as in a crash and, system.server_downtime_s later, created again from its checkpoint\n"
+    "directory (server.checkpoint_dir, default OUT/server_checkpoint, emptied at the start);\n"
+    "metrics.json then holds server_durability and server_restarts.\n"
     "--json: print metrics.json to stdout instead of the report.\n"
     "Exit: 0 ok, 1 failure while running, 2 bad input.\n";
 
@@ -87,6 +91,7 @@ struct Args {
   bool no_server = false, json = false, help = false, plots = true, quiet = false;
   std::string bandwidth, link_trace;
   long max_frames = -1;
+  std::vector<double> restart_at;
 };
 
 /// Parses argv; returns an error message (empty: ok).
@@ -128,6 +133,13 @@ std::string parseArgs(int argc, char** argv, Args* a) {
         return "--bandwidth '" + a->bandwidth + "' is not a positive number of Mbit/s";
     } else if (arg == "--link-trace") {
       if (!value(&a->link_trace)) return "--link-trace needs a file";
+    } else if (arg == "--server-restart-at") {
+      if (!value(&v)) return "--server-restart-at needs S (simulated seconds)";
+      char* end = nullptr;
+      const double t = std::strtod(v.c_str(), &end);
+      if (v.empty() || *end != '\0' || !(t >= 0) || !std::isfinite(t))
+        return "--server-restart-at '" + v + "' is not a time >= 0 s";
+      a->restart_at.push_back(t);
     } else if (arg == "--max-frames") {
       if (!value(&v)) return "--max-frames needs N";
       char* end = nullptr;
@@ -147,6 +159,8 @@ std::string parseArgs(int argc, char** argv, Args* a) {
     return "--no-server runs one agent: give one --dataset";
   if (a->no_server && (!a->bandwidth.empty() || !a->link_trace.empty()))
     return "--bandwidth/--link-trace need the server (drop --no-server)";
+  if (a->no_server && !a->restart_at.empty())
+    return "--server-restart-at needs the server (drop --no-server)";
   return "";
 }
 
@@ -214,6 +228,7 @@ int main(int argc, char** argv) {
   if (!config.ok()) return badInput(config.error());
   auto params = system::readSystemParams(*config);
   if (!params.ok()) return badInput(params.error());
+  for (double t : args.restart_at) params->clock.server_restart_at.push_back(t);
 
   std::vector<system::AgentSource> sources;
   std::set<std::string> names;
@@ -235,6 +250,8 @@ int main(int argc, char** argv) {
   const fs::path out(args.out);
   fs::create_directories(out / "trajectories", ec);
   if (ec || !fs::is_directory(out, ec)) return badInput("cannot create output folder " + out.string());
+  if (!params->clock.server_restart_at.empty() && !params->server.checkpoint.enabled())
+    params->server.checkpoint.dir = (out / "server_checkpoint").string();
   if (Status s = writeText(out / "config_used.yaml", params->yaml()); !s) return failure(s.error());
   for (const system::AgentSource& s : sources)
     if (!s.dataset->info().groundtruth.empty())
@@ -250,8 +267,9 @@ int main(int argc, char** argv) {
                                         HERMES_SOURCE_DIR);
   if (!run.ok()) return badInput(run.error());
   std::vector<server::LoopAttempt> attempts;
-  (*run)->server().mapManager().setAttemptHook(
-      [&attempts](const server::LoopAttempt& a) { attempts.push_back(a); });
+  (*run)->onServerCreated([&attempts](server::Server& srv) {
+    srv.mapManager().setAttemptHook([&attempts](const server::LoopAttempt& a) { attempts.push_back(a); });
+  });
   using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
   auto wall = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };

@@ -99,4 +99,11 @@ std::vector<std::pair<KeyframeKey, double>> BowDatabase::score(
   return out;
 }
 
+std::vector<KeyframeKey> BowDatabase::keysInSlotOrder() const {
+  std::vector<KeyframeKey> out;
+  for (const KeyframeKey& k : slots_)
+    if (slot_of_.count(k)) out.push_back(k);
+  return out;
+}
+
 }  // namespace hermes

@@ -1,6 +1,8 @@
 // Credibility scores and the aging priority queue of pending submaps.
 #include "hermes/server/credibility.h"
 
+#include "hermes/server/byte_codec.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -130,6 +132,74 @@ std::optional<PopRecord> CredibilityAssessor::pop(double now) {
   }
   if (logger_) logger_(rec);
   return rec;
+}
+
+namespace {
+
+void saveItem(server::ByteWriter* w, const PendingSubmap& p) {
+  w->pod(p.agent);
+  w->pod(p.session);
+  w->pod(p.seq);
+  w->pod(p.arrival);
+  w->pod(p.handle);
+}
+
+bool loadItem(server::ByteReader* r, PendingSubmap* p) {
+  return r->pod(&p->agent) && r->pod(&p->session) && r->pod(&p->seq) && r->pod(&p->arrival) &&
+         std::isfinite(p->arrival) && r->pod(&p->handle);
+}
+
+}  // namespace
+
+std::vector<PendingSubmap> CredibilityAssessor::pending() const {
+  std::vector<PendingSubmap> out;
+  for (const auto& [agent, q] : queues_)
+    for (const Queued& e : q) out.push_back(e.item);
+  return out;
+}
+
+void CredibilityAssessor::save(server::ByteWriter* w) const {
+  w->pod(pushes_);
+  w->pod(pops_);
+  w->count(size_);
+  for (const auto& [agent, q] : queues_)
+    for (const Queued& e : q) {
+      saveItem(w, e.item);
+      w->pod(e.push_order);
+    }
+  w->count(history_.size());
+  for (const PopRecord& h : history_) {
+    saveItem(w, h.item);
+    w->pod(h.order);
+    for (double v : {h.popped_at, h.waited_s, h.score.ts, h.score.mc, h.score.c, h.priority}) w->pod(v);
+    w->count(h.queue_size);
+  }
+}
+
+bool CredibilityAssessor::load(server::ByteReader* r) {
+  std::uint64_t n = 0;
+  if (size_ != 0 || !history_.empty() || !r->pod(&pushes_) || !r->pod(&pops_) || !r->count(&n, 40))
+    return false;
+  for (std::uint64_t i = 0; i < n; ++i) {
+    Queued e;
+    if (!loadItem(r, &e.item) || !r->pod(&e.push_order) || e.push_order >= pushes_) return false;
+    auto& q = queues_[e.item.agent];
+    if (!q.empty() && q.back().push_order >= e.push_order) return false;  // arrival order
+    q.push_back(e);
+    ++size_;
+  }
+  if (!r->count(&n, 96)) return false;
+  for (std::uint64_t i = 0; i < n; ++i) {
+    PopRecord h;
+    std::uint64_t queue_size = 0;
+    if (!loadItem(r, &h.item) || !r->pod(&h.order) || !r->pod(&h.popped_at) ||
+        !r->pod(&h.waited_s) || !r->pod(&h.score.ts) || !r->pod(&h.score.mc) ||
+        !r->pod(&h.score.c) || !r->pod(&h.priority) || !r->pod(&queue_size))
+      return false;
+    h.queue_size = static_cast<std::size_t>(queue_size);
+    history_.push_back(h);
+  }
+  return true;
 }
 
 }  // namespace hermes

@@ -1,108 +1,189 @@
 #include "hermes/server/global_map.h"
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <iterator>
 
 #include "hermes/core/crc32.h"
-#include "hermes/core/wire_format.h"
+#include "hermes/server/byte_codec.h"
 
 namespace hermes {
 namespace server {
 namespace {
 
 constexpr char kMagic[4] = {'H', 'G', 'M', 'P'};
-constexpr std::uint32_t kVersion = 1;
+// 1: trajectories as wire-format submap frames (lossy: float information,
+//    observations rebuilt). 2: every field as stored, loops with inliers.
+constexpr std::uint32_t kVersion = 2;
+constexpr std::size_t kKeypointBytes = 4 + 4 + 1 + 4 + 32 + 8;  // + descriptor + landmark
 
-class Writer {
- public:
-  template <class T>
-  void pod(const T& v) {
-    const auto* p = reinterpret_cast<const std::uint8_t*>(&v);
-    out.insert(out.end(), p, p + sizeof(T));
-  }
-  void pose(const SE3& T) {
-    const Quat q = T.quat();
-    for (double v : {q.x(), q.y(), q.z(), q.w()}) pod(v);
-    for (int i = 0; i < 3; ++i) pod(T.translation()[i]);
-  }
-  void key(const KeyframeKey& k) {
-    pod(k.agent);
-    pod(k.session);
-    pod(k.id);
-  }
-  std::vector<std::uint8_t> out;
-};
-
-class Reader {
- public:
-  Reader(const std::vector<std::uint8_t>& b, std::size_t end) : bytes(b), end_(end) {}
-  template <class T>
-  bool pod(T* v) {
-    if (pos + sizeof(T) > end_) return false;
-    std::memcpy(v, bytes.data() + pos, sizeof(T));
-    pos += sizeof(T);
-    return true;
-  }
-  bool pose(SE3* T) {
-    double q[4], t[3];
-    for (double& v : q)
-      if (!pod(&v)) return false;
-    for (double& v : t)
-      if (!pod(&v)) return false;
-    Quat quat(q[3], q[0], q[1], q[2]);
-    if (!std::isfinite(quat.norm()) || quat.norm() < 1e-6) return false;
-    *T = SE3(quat.normalized(), Vec3(t[0], t[1], t[2]));
-    return true;
-  }
-  bool key(KeyframeKey* k) { return pod(&k->agent) && pod(&k->session) && pod(&k->id); }
-  const std::vector<std::uint8_t>& bytes;
-  std::size_t pos = 0;
-  std::size_t end_;
-};
-
-bool sameCamera(const PinholeIntrinsics& a, const PinholeIntrinsics& b) {
-  return a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy && a.width == b.width &&
-         a.height == b.height;
+void writeCamera(ByteWriter* w, const PinholeIntrinsics& c) {
+  for (double v : {c.fx, c.fy, c.cx, c.cy}) w->pod(v);
+  w->pod(static_cast<std::int32_t>(c.width));
+  w->pod(static_cast<std::int32_t>(c.height));
 }
 
-/// The trajectory as one submap (keypoint_landmark rebuilt from the observations).
-Submap asSubmap(const TrajectoryMap& traj) {
-  Submap s;
-  s.header.agent = traj.uuid;
-  s.header.session = traj.session;
-  std::map<KeyframeId, std::size_t> index;
-  for (const auto& [id, kf] : traj.keyframes) {
-    std::uint32_t cam = 0;
-    while (cam < s.cameras.size() && !sameCamera(s.cameras[cam], kf.camera)) ++cam;
-    if (cam == s.cameras.size()) s.cameras.push_back(kf.camera);
-    index[id] = s.keyframes.size();
-    s.keyframes.push_back(kf.keyframe);
-    s.keyframes.back().camera_id = cam;
-    auto& kl = s.keyframes.back().keypoint_landmark;
-    kl.assign(s.keyframes.back().keypoints.size(), kInvalidId);
+bool readCamera(ByteReader* r, PinholeIntrinsics* c) {
+  std::int32_t width = 0, height = 0;
+  if (!r->pod(&c->fx) || !r->pod(&c->fy) || !r->pod(&c->cx) || !r->pod(&c->cy) ||
+      !r->pod(&width) || !r->pod(&height))
+    return false;
+  c->width = width;
+  c->height = height;
+  return std::isfinite(c->fx) && std::isfinite(c->fy) && std::isfinite(c->cx) &&
+         std::isfinite(c->cy) && c->fx > 0 && c->fy > 0 && width > 0 && height > 0;
+}
+
+void writeKeyframe(ByteWriter* w, const StoredKeyframe& sk) {
+  const Keyframe& kf = sk.keyframe;
+  w->pod(kf.id);
+  w->pod(kf.stamp);
+  w->pose(kf.T_A_C);
+  w->pod(kf.camera_id);
+  w->flag(kf.lost_before);
+  writeCamera(w, sk.camera);
+  w->pose(sk.T_W_C);
+  w->count(kf.keypoints.size());
+  for (const Keypoint& k : kf.keypoints) {
+    w->pod(k.u);
+    w->pod(k.v);
+    w->pod(k.octave);
+    w->pod(k.depth);
   }
-  if (!s.keyframes.empty()) {
-    s.header.t_start = s.keyframes.front().stamp;
-    s.header.t_end = s.keyframes.back().stamp;
+  for (const Descriptor& d : kf.descriptors) w->pod(d);
+  for (LandmarkId l : kf.keypoint_landmark) w->pod(l);
+}
+
+bool readKeyframe(ByteReader* r, StoredKeyframe* sk) {
+  Keyframe& kf = sk->keyframe;
+  std::uint64_t n = 0;
+  if (!r->pod(&kf.id) || !r->pod(&kf.stamp) || !std::isfinite(kf.stamp) || !r->pose(&kf.T_A_C) ||
+      !r->pod(&kf.camera_id) || !r->flag(&kf.lost_before) || !readCamera(r, &sk->camera) ||
+      !r->pose(&sk->T_W_C) || !r->count(&n, kKeypointBytes))
+    return false;
+  kf.keypoints.resize(n);
+  kf.descriptors.resize(n);
+  kf.keypoint_landmark.resize(n);
+  for (Keypoint& k : kf.keypoints)
+    if (!r->pod(&k.u) || !r->pod(&k.v) || !r->pod(&k.octave) || !r->pod(&k.depth) ||
+        !std::isfinite(k.u) || !std::isfinite(k.v) || !std::isfinite(k.depth))
+      return false;
+  for (Descriptor& d : kf.descriptors)
+    if (!r->pod(&d)) return false;
+  for (LandmarkId& l : kf.keypoint_landmark)
+    if (!r->pod(&l)) return false;
+  return true;
+}
+
+void writeLandmark(ByteWriter* w, const StoredLandmark& sl) {
+  const Landmark& l = sl.landmark;
+  w->pod(l.id);
+  w->vec3(l.p_A);
+  w->pod(l.descriptor);
+  w->pod(sl.anchor);
+  w->vec3(sl.p_anchor);
+  w->count(l.observations.size());
+  for (const Observation& o : l.observations) {
+    w->pod(o.keyframe);
+    w->pod(o.keypoint);
   }
-  for (const auto& [id, lm] : traj.landmarks) {
-    Landmark l = lm.landmark;
-    l.observations.clear();
-    for (const Observation& o : lm.landmark.observations) {
-      auto it = index.find(o.keyframe);
-      if (it == index.end()) continue;
-      Keyframe& kf = s.keyframes[it->second];
-      if (o.keypoint >= kf.keypoints.size() || kf.keypoint_landmark[o.keypoint] != kInvalidId)
-        continue;
-      kf.keypoint_landmark[o.keypoint] = id;
-      l.observations.push_back(o);
+}
+
+bool readLandmark(ByteReader* r, StoredLandmark* sl) {
+  Landmark& l = sl->landmark;
+  std::uint64_t n = 0;
+  if (!r->pod(&l.id) || !r->vec3(&l.p_A) || !r->pod(&l.descriptor) || !r->pod(&sl->anchor) ||
+      !r->vec3(&sl->p_anchor) || !r->count(&n, 12))
+    return false;
+  l.observations.resize(n);
+  for (Observation& o : l.observations)
+    if (!r->pod(&o.keyframe) || !r->pod(&o.keypoint)) return false;
+  return true;
+}
+
+void writeTrajectory(ByteWriter* w, const TrajectoryMap& t) {
+  w->pod(t.agent);
+  w->pod(t.session);
+  w->pod(t.uuid);
+  w->flag(t.anchored);
+  w->pose(t.T_W_A);
+  w->count(t.keyframes.size());
+  for (const auto& [id, kf] : t.keyframes) writeKeyframe(w, kf);
+  w->count(t.landmarks.size());
+  for (const auto& [id, lm] : t.landmarks) writeLandmark(w, lm);
+  w->count(t.odometry.size());
+  for (const auto& [ids, e] : t.odometry) {
+    w->pod(e.from);
+    w->pod(e.to);
+    w->pose(e.T_from_to);
+    w->mat6(e.information);
+  }
+}
+
+/// Reads one trajectory; the reason names what is wrong.
+Status readTrajectory(ByteReader* r, TrajectoryMap* t) {
+  std::uint64_t n = 0;
+  if (!r->pod(&t->agent) || !r->pod(&t->session) || !r->pod(&t->uuid) || !r->flag(&t->anchored) ||
+      !r->pose(&t->T_W_A) || !r->count(&n, 100))
+    return Error{"bad header"};
+  for (std::uint64_t i = 0; i < n; ++i) {
+    StoredKeyframe sk;
+    if (!readKeyframe(r, &sk)) return Error{"keyframe " + std::to_string(i) + " damaged"};
+    const KeyframeId id = sk.keyframe.id;
+    if (!t->keyframes.emplace(id, std::move(sk)).second)
+      return Error{"keyframe id " + std::to_string(id) + " twice"};
+  }
+  if (!r->count(&n, 60)) return Error{"bad landmark count"};
+  for (std::uint64_t i = 0; i < n; ++i) {
+    StoredLandmark sl;
+    if (!readLandmark(r, &sl)) return Error{"landmark " + std::to_string(i) + " damaged"};
+    if (sl.anchor != kInvalidId && !t->keyframes.count(sl.anchor))
+      return Error{"landmark " + std::to_string(sl.landmark.id) + " anchored to unknown keyframe " +
+                   std::to_string(sl.anchor)};
+    for (const Observation& o : sl.landmark.observations) {
+      auto k = t->keyframes.find(o.keyframe);
+      if (k != t->keyframes.end() && o.keypoint >= k->second.keyframe.keypoints.size())
+        return Error{"landmark " + std::to_string(sl.landmark.id) + " observes keypoint " +
+                     std::to_string(o.keypoint) + " of keyframe " + std::to_string(o.keyframe) +
+                     ", which has fewer"};
     }
-    if (!l.observations.empty()) s.landmarks.push_back(std::move(l));
+    const LandmarkId id = sl.landmark.id;
+    if (!t->landmarks.emplace(id, std::move(sl)).second)
+      return Error{"landmark id " + std::to_string(id) + " twice"};
   }
-  for (const auto& [ids, e] : traj.odometry)
-    if (index.count(e.from) && index.count(e.to)) s.odometry.push_back(e);
-  return s;
+  if (!r->count(&n, 16 + 56 + 288)) return Error{"bad odometry count"};
+  for (std::uint64_t i = 0; i < n; ++i) {
+    OdometryEdge e;
+    if (!r->pod(&e.from) || !r->pod(&e.to) || !r->pose(&e.T_from_to) || !r->mat6(&e.information))
+      return Error{"odometry edge " + std::to_string(i) + " damaged"};
+    if (!t->odometry.emplace(std::make_pair(e.from, e.to), e).second)
+      return Error{"odometry edge " + std::to_string(e.from) + "->" + std::to_string(e.to) + " twice"};
+  }
+  return Status::Ok();
+}
+
+void writeLoop(ByteWriter* w, const LoopEdge& l) {
+  w->pod(l.id);
+  w->key(l.a);
+  w->key(l.b);
+  w->pose(l.T_a_b);
+  w->mat6(l.information);
+  w->mat6(l.covariance);
+  w->flag(l.accepted);
+  w->pod(static_cast<std::int32_t>(l.inliers));
+  w->pod(static_cast<std::int32_t>(l.depth_inliers));
+}
+
+bool readLoop(ByteReader* r, LoopEdge* l) {
+  std::int32_t inliers = 0, depth_inliers = 0;
+  if (!r->pod(&l->id) || !r->key(&l->a) || !r->key(&l->b) || !r->pose(&l->T_a_b) ||
+      !r->mat6(&l->information) || !r->mat6(&l->covariance) || !r->flag(&l->accepted) ||
+      !r->pod(&inliers) || !r->pod(&depth_inliers))
+    return false;
+  l->inliers = inliers;
+  l->depth_inliers = depth_inliers;
+  return true;
 }
 
 }  // namespace
@@ -159,35 +240,13 @@ std::vector<Vec3> GlobalMap::landmarkPositionsWorld() const {
 }
 
 std::vector<std::uint8_t> GlobalMap::toBytes() const {
-  Writer w;
-  w.out.insert(w.out.end(), kMagic, kMagic + 4);
+  ByteWriter w;
+  w.out.assign(kMagic, kMagic + 4);
   w.pod(kVersion);
-  w.pod(static_cast<std::uint32_t>(trajectories.size()));
-  for (const auto& [tid, t] : trajectories) {
-    w.pod(t.agent);
-    w.pod(t.session);
-    w.pod(static_cast<std::uint8_t>(t.anchored));
-    w.pose(t.T_W_A);
-    w.pod(static_cast<std::uint64_t>(t.keyframes.size()));
-    for (const auto& [id, kf] : t.keyframes) {
-      w.pod(id);
-      w.pose(kf.T_W_C);
-    }
-    auto frame = encodeSubmap(asSubmap(t));
-    const std::vector<std::uint8_t> bytes = frame ? std::move(*frame) : std::vector<std::uint8_t>{};
-    w.pod(static_cast<std::uint64_t>(bytes.size()));
-    w.out.insert(w.out.end(), bytes.begin(), bytes.end());
-  }
-  w.pod(static_cast<std::uint64_t>(loops.size()));
-  for (const LoopEdge& l : loops) {
-    w.pod(l.id);
-    w.key(l.a);
-    w.key(l.b);
-    w.pose(l.T_a_b);
-    for (int i = 0; i < 36; ++i) w.pod(l.information.data()[i]);
-    for (int i = 0; i < 36; ++i) w.pod(l.covariance.data()[i]);
-    w.pod(static_cast<std::uint8_t>(l.accepted));
-  }
+  w.count(trajectories.size());
+  for (const auto& [tid, t] : trajectories) writeTrajectory(&w, t);
+  w.count(loops.size());
+  for (const LoopEdge& l : loops) writeLoop(&w, l);
   w.pod(crc32(w.out.data(), w.out.size()));
   return w.out;
 }
@@ -200,66 +259,32 @@ Expected<GlobalMap> GlobalMap::fromBytes(const std::vector<std::uint8_t>& bytes,
   std::uint32_t stored_crc;
   std::memcpy(&stored_crc, bytes.data() + bytes.size() - 4, 4);
   if (crc32(bytes.data(), bytes.size() - 4) != stored_crc) return Error{where + "CRC mismatch"};
-  Reader r(bytes, bytes.size() - 4);
-  r.pos = 4;
-  std::uint32_t version = 0, count = 0;
+  ByteReader r(bytes.data() + 4, bytes.size() - 8);
+  std::uint32_t version = 0;
+  std::uint64_t count = 0;
   if (!r.pod(&version) || version != kVersion)
-    return Error{where + "unsupported version " + std::to_string(version)};
-  if (!r.pod(&count)) return Error{where + "truncated header"};
+    return Error{where + "unsupported version " + std::to_string(version) + " (this build reads " +
+                 std::to_string(kVersion) + ")"};
+  if (!r.count(&count, 48)) return Error{where + "bad trajectory count"};
   GlobalMap map;
-  for (std::uint32_t i = 0; i < count; ++i) {
+  for (std::uint64_t i = 0; i < count; ++i) {
     TrajectoryMap t;
-    std::uint8_t anchored = 0;
-    std::uint64_t nkf = 0, frame_bytes = 0;
-    if (!r.pod(&t.agent) || !r.pod(&t.session) || !r.pod(&anchored) || !r.pose(&t.T_W_A) ||
-        !r.pod(&nkf) || nkf > bytes.size())
-      return Error{where + "trajectory " + std::to_string(i) + ": bad header"};
-    t.anchored = anchored != 0;
-    std::map<KeyframeId, SE3> poses;
-    for (std::uint64_t k = 0; k < nkf; ++k) {
-      KeyframeId id;
-      SE3 T;
-      if (!r.pod(&id) || !r.pose(&T))
-        return Error{where + "trajectory " + std::to_string(i) + ": truncated poses"};
-      poses[id] = T;
-    }
-    if (!r.pod(&frame_bytes) || r.pos + frame_bytes > r.end_)
-      return Error{where + "trajectory " + std::to_string(i) + ": truncated submap frame"};
-    auto submap = decodeSubmap(bytes.data() + r.pos, frame_bytes);
-    if (!submap)
-      return Error{where + "trajectory " + std::to_string(i) + ": " + submap.error()};
-    r.pos += frame_bytes;
-    t.uuid = submap->header.agent;
-    for (Keyframe& kf : submap->keyframes) {
-      StoredKeyframe sk;
-      sk.camera = submap->cameras[kf.camera_id];
-      auto p = poses.find(kf.id);
-      sk.T_W_C = p != poses.end() ? p->second : kf.T_A_C;
-      sk.keyframe = std::move(kf);
-      t.keyframes[sk.keyframe.id] = std::move(sk);
-    }
-    for (Landmark& lm : submap->landmarks) {
-      StoredLandmark sl;
-      sl.landmark = std::move(lm);
-      anchorLandmark(t, &sl);
-      t.landmarks[sl.landmark.id] = std::move(sl);
-    }
-    for (const OdometryEdge& e : submap->odometry) t.odometry[{e.from, e.to}] = e;
-    map.trajectories[{t.agent, t.session}] = std::move(t);
+    if (Status s = readTrajectory(&r, &t); !s)
+      return Error{where + "trajectory " + std::to_string(i) + ": " + s.error()};
+    const TrajectoryId id{t.agent, t.session};
+    if (!map.trajectories.emplace(id, std::move(t)).second)
+      return Error{where + "trajectory (" + std::to_string(id.first) + ", " +
+                   std::to_string(id.second) + ") twice"};
   }
-  std::uint64_t nloops = 0;
-  if (!r.pod(&nloops) || nloops > bytes.size()) return Error{where + "bad loop count"};
-  for (std::uint64_t i = 0; i < nloops; ++i) {
+  if (!r.count(&count, 400)) return Error{where + "bad loop count"};
+  for (std::uint64_t i = 0; i < count; ++i) {
     LoopEdge l;
-    std::uint8_t acc = 0;
-    bool ok = r.pod(&l.id) && r.key(&l.a) && r.key(&l.b) && r.pose(&l.T_a_b);
-    for (int k = 0; ok && k < 36; ++k) ok = r.pod(l.information.data() + k);
-    for (int k = 0; ok && k < 36; ++k) ok = r.pod(l.covariance.data() + k);
-    if (!ok || !r.pod(&acc)) return Error{where + "loop " + std::to_string(i) + " truncated"};
-    l.accepted = acc != 0;
+    if (!readLoop(&r, &l)) return Error{where + "loop " + std::to_string(i) + " damaged"};
+    if (!map.keyframe(l.a) || !map.keyframe(l.b))
+      return Error{where + "loop " + std::to_string(l.id) + " joins a keyframe the map does not hold"};
     map.loops.push_back(l);
   }
-  if (r.pos != r.end_) return Error{where + "trailing bytes before the CRC"};
+  if (!r.atEnd()) return Error{where + "trailing bytes before the CRC"};
   return map;
 }
 

@@ -1,5 +1,7 @@
 #include "hermes/server/pcm.h"
 
+#include "hermes/server/byte_codec.h"
+
 #include <algorithm>
 #include <chrono>
 
@@ -132,6 +134,42 @@ Expected<RelativePose> OdometryChain::relative(const KeyframeKey& from, const Ke
   out.covariance = forward ? c.covariance : invertedCovariance(c.T, c.covariance);
   out.path_length_m = path;
   return out;
+}
+
+void OdometryChain::save(ByteWriter* w) const {
+  w->pod(revision_);
+  w->count(trajectories_.size());
+  for (const auto& [tid, traj] : trajectories_) {
+    w->pod(tid.first);
+    w->pod(tid.second);
+    w->count(traj.size());
+    for (const auto& [id, e] : traj) {
+      w->pod(id);
+      w->pose(e.T_A_K);
+      w->flag(e.has_edge_to_next);
+      w->mat6(e.covariance_to_next);
+    }
+  }
+}
+
+bool OdometryChain::load(ByteReader* r) {
+  std::uint64_t trajectories = 0;
+  if (!trajectories_.empty() || !r->pod(&revision_) || !r->count(&trajectories, 16)) return false;
+  for (std::uint64_t i = 0; i < trajectories; ++i) {
+    std::pair<std::uint32_t, std::uint32_t> tid;
+    std::uint64_t n = 0;
+    if (!r->pod(&tid.first) || !r->pod(&tid.second) || !r->count(&n, 8 + 56 + 1 + 288)) return false;
+    Trajectory& traj = trajectories_[tid];
+    if (!traj.empty()) return false;  // the same trajectory twice
+    for (std::uint64_t k = 0; k < n; ++k) {
+      KeyframeId id = 0;
+      Entry e;
+      if (!r->pod(&id) || !r->pose(&e.T_A_K) || !r->flag(&e.has_edge_to_next) ||
+          !r->mat6(&e.covariance_to_next) || !traj.emplace(id, e).second)
+        return false;
+    }
+  }
+  return true;
 }
 
 OdometryQuery OdometryChain::query() const {

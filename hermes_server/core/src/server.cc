@@ -1,5 +1,7 @@
 #include "hermes/server/server.h"
 
+#include "hermes/core/frame_auth.h"
+
 #include <chrono>
 
 namespace hermes {
@@ -11,6 +13,7 @@ Status ServerParams::read(const Config& config, const std::string& prefix) {
   if (Status s = map.read(config, prefix); !s) return s;
   if (Status s = auth.read(config, prefix + "auth."); !s) return s;
   if (Status s = queue.read(config, prefix + "queue."); !s) return s;
+  if (Status s = checkpoint.read(config, prefix); !s) return s;
   return validate();
 }
 
@@ -20,11 +23,12 @@ void ServerParams::write(ConfigWriter& out, const std::string& prefix) const {
   map.write(out, prefix);
   auth.write(out, prefix + "auth.");
   queue.write(out, prefix + "queue.");
+  checkpoint.write(out, prefix);
 }
 
 Status ServerParams::validate() const {
   for (Status s : {bookkeeper.validate(), credibility.validate(), map.validate(), auth.validate(),
-                   queue.validate()})
+                   queue.validate(), checkpoint.validate()})
     if (!s) return s;
   return Status::Ok();
 }
@@ -42,6 +46,7 @@ Expected<std::unique_ptr<Server>> Server::create(const ServerParams& params,
   }
   auto vocabulary = loadVocabulary(params.map.place_recognition, base_dir);
   if (!vocabulary) return Error{"server: " + vocabulary.error()};
+  if (params.checkpoint.enabled()) return resume(params, *vocabulary, std::move(keyring));
   return std::make_unique<Server>(params, *vocabulary, std::move(keyring));
 }
 
@@ -61,7 +66,9 @@ Server::Server(const ServerParams& params, std::shared_ptr<const Vocabulary> voc
         p.arrival = r.arrival_time;
         p.handle = next_handle_++;
         quotas_.hold(r.robot, r.bytes);
-        stored_.emplace(p.handle, std::move(r));
+        Pending& stored = stored_[p.handle];
+        stored.submap = std::move(r);
+        if (receiving_) stored.frame.assign(receiving_, receiving_ + receiving_size_);
         queue_.push(p);
       },
                 DecodeLimits{},
@@ -75,11 +82,49 @@ Server::Server(const ServerParams& params, std::shared_ptr<const Vocabulary> voc
 
 ReceiveResult Server::onFrame(const std::uint8_t* data, std::size_t size,
                               const SubmapHeader* claimed, double now) {
+  receiving_ = data;  // the sink keeps a copy of an accepted frame
+  receiving_size_ = size;
+  struct Clear {
+    Server* s;
+    ~Clear() { s->receiving_ = nullptr; }
+  } clear{this};
+  if (store_) return receiveJournaled(data, size, claimed, now);
   return receiver_.receive(data, size, claimed, now);
 }
 
+ReceiveResult Server::receiveJournaled(const std::uint8_t* data, std::size_t size,
+                                       const SubmapHeader* claimed, double now) {
+  auto peeked = peekFrame(data, size);
+  const auto robot = peeked ? bookkeeper_.robotOf(peeked->routing.agent) : std::nullopt;
+  if (!peeked ||
+      (robot && bookkeeper_.isDuplicate(*robot, peeked->routing.session, peeked->routing.seq)))
+    return receiver_.receive(data, size, claimed, now);  // rejected, or only acknowledged again
+  // Nothing unauthenticated reaches the disk: the receiver refuses it with its reason.
+  if (keyring_) {
+    const Keyring::Entry* key = keyring_->find(peeked->routing.agent);
+    if (!key || verifyFrameTag(data, size, key->key) != TagCheck::kValid)
+      return receiver_.receive(data, size, claimed, now);
+  }
+  // Durably queued before acknowledged (DESIGN.md §9).
+  const SubmapHeader& routing = peeked->routing;
+  if (Status s = store_->journalPut(routing, now, data, size); !s) {
+    ++durability_.journal_errors;
+    durability_.last_error = s.error();
+    ReceiveResult r;
+    r.routing = routing;
+    r.reason = "not acknowledged: " + s.error();
+    return r;
+  }
+  ReceiveResult r = receiver_.receive(data, size, claimed, now);
+  if (r.verdict == ArrivalVerdict::kAccept)
+    journaled_.push_back(routing);
+  else
+    store_->journalRemove(routing);
+  return r;
+}
+
 int Server::process(double now, int max_submaps) {
-  int merged = 0;
+  int merged = 0, popped = 0;
   const auto credibility = [this](RobotId r) { return queue_.score(r).c; };
   while (!queue_.empty() && (max_submaps < 0 || merged < max_submaps)) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -88,7 +133,7 @@ int Server::process(double now, int max_submaps) {
     if (!record) break;
     auto it = stored_.find(record->item.handle);
     if (it == stored_.end()) continue;
-    ReceivedSubmap r = std::move(it->second);
+    ReceivedSubmap r = std::move(it->second.submap);
     stored_.erase(it);
     quotas_.release(r.robot, r.bytes);
     auto stats = map_.merge(r.robot, r.submap, credibility);
@@ -106,7 +151,10 @@ int Server::process(double now, int max_submaps) {
     timings_.add("submap", std::chrono::duration<double, std::milli>(
                                std::chrono::steady_clock::now() - t0)
                                .count());
+    ++popped;
   }
+  if (popped > 0 && store_ && now - last_checkpoint_ >= params_.checkpoint.period_s)
+    (void)checkpoint(now);  // counted and kept in durability(); the journal still holds everything
   return merged;
 }
 
@@ -114,6 +162,34 @@ TimingStats Server::timings() const {
   TimingStats t = map_.timings();
   t.merge(timings_);
   return t;
+}
+
+Status Server::checkpoint(double now) {
+  if (!store_) return Status::Ok();
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<std::uint8_t> body = saveState();
+  auto written = store_->write(body);
+  if (!written) {
+    ++durability_.checkpoint_errors;
+    durability_.last_error = written.error();
+    return Error{written.error()};
+  }
+  // Everything accepted so far is in this checkpoint (merged or pending). A
+  // journal entry goes once the oldest checkpoint kept covers it too: falling
+  // back to that one still finds everything accepted after it.
+  covered_.push_back(std::move(journaled_));
+  journaled_.clear();
+  while (covered_.size() > static_cast<std::size_t>(params_.checkpoint.keep - 1)) {
+    for (const SubmapHeader& h : covered_.front()) store_->journalRemove(h);
+    covered_.pop_front();
+  }
+  last_checkpoint_ = now;
+  ++durability_.checkpoints;
+  durability_.last_checkpoint_bytes = body.size();
+  timings_.add("checkpoint", std::chrono::duration<double, std::milli>(
+                                 std::chrono::steady_clock::now() - t0)
+                                 .count());
+  return Status::Ok();
 }
 
 }  // namespace server

@@ -11,11 +11,22 @@
 //     distill (budget from the monitor) -> encode -> spool -> transport -> link.send
 //   every server_period_s: Server::process (credibility order, merge, loops, graph)
 // After the last frame the link runs on for at most drain_s so the backlog arrives.
+//
+// Server restarts (system.server_restart_at): at each time the server object is
+// destroyed as in a crash (no clean checkpoint), frames arriving while it is
+// down are lost (never acknowledged), and server_downtime_s later it is created
+// again from its checkpoint directory; the agents are told it is back
+// (UplinkSender::onReconnect: resend everything unacknowledged) and the server
+// drops what it had already accepted. Without server.checkpoint_dir the runner
+// uses <spool_root>/../server_checkpoint; the directory is emptied when the run
+// starts (a run starts fresh, like the spools), and the server writes a last
+// checkpoint when the run ends.
 #pragma once
 
 #include <functional>
 #include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -41,7 +52,22 @@ struct OfflineAgent {
   double clock_offset = 0;           ///< dataset stamp of frame 0 (sim t = stamp - offset)
   std::optional<RobotId> robot;      ///< server robot id once a submap was accepted
   std::size_t acked = 0, lost_messages = 0;
+  std::size_t resent = 0;      ///< frames handed to the link again (same session and seq)
+  std::size_t duplicates = 0;  ///< frames the server only acknowledged again (already accepted)
+  std::set<std::pair<std::uint32_t, std::uint64_t>> sent;  ///< (session, seq) handed to the link
   double next_retry = 0;  ///< [s] after the last frame: next try of a deferred window
+};
+
+/// One server restart of the run (metrics.json "server_restarts").
+struct ServerRestart {
+  double down_at_s = 0, up_at_s = 0;  ///< [s] simulated destruction and re-creation
+  double resume_ms = 0;               ///< wall time of re-creating it from disk [ms]
+  std::string checkpoint;             ///< file it resumed from (empty: journal only)
+  std::vector<std::string> problems;  ///< files refused on resume, with reasons
+  std::size_t journal_replayed = 0;   ///< accepted after that checkpoint, queued again
+  std::size_t frames_lost_down = 0;   ///< frames that arrived while there was no server
+  std::size_t resends_before = 0;     ///< agents' resends up to the destruction
+  double first_accept_s = -1;         ///< [s] simulated time of the first new submap accepted after it
 };
 
 struct ProgressInfo {
@@ -68,8 +94,12 @@ class OfflineRun {
 
   const std::vector<OfflineAgent>& agents() const { return agents_; }
   const server::Server& server() const { return *server_; }
-  /// For test/bench hooks (MapManager::setCandidateHook) before run().
+  /// For test/bench hooks (MapManager::setCandidateHook) before run(); use
+  /// onServerCreated() for hooks that must survive a restart.
   server::Server& server() { return *server_; }
+  /// Applies `setup` to the server now and to every server created again after a restart.
+  void onServerCreated(std::function<void(server::Server&)> setup);
+  const std::vector<ServerRestart>& restarts() const { return restarts_; }
   const SharedLink& link() const { return *link_; }
   const std::vector<BandwidthSample>& bandwidth() const { return bandwidth_; }
   /// Per agent: (sim time, bandwidth estimate [B/s]) at each bandwidth sample.
@@ -87,6 +117,8 @@ class OfflineRun {
   void deliver(double t);
   void acknowledge(double t);
   void sample(double t);
+  /// Destroys / re-creates the server at the configured restart times.
+  Status restartServer(double t);
   /// Agents past their last frame try their deferred window again (one per period).
   void retryCarriedWindows(double t);
 
@@ -112,6 +144,11 @@ class OfflineRun {
   std::vector<BandwidthSample> bandwidth_;
   std::map<std::string, std::vector<std::pair<double, double>>> estimates_;
   std::vector<std::size_t> last_transmitted_;
+  std::string base_dir_;
+  std::function<void(server::Server&)> server_setup_;
+  std::vector<ServerRestart> restarts_;
+  std::size_t next_restart_ = 0;
+  double server_up_at_ = -1;  ///< [s] while the server is down: when it comes back
   double now_ = 0, next_sample_ = 0, next_server_ = 0;
 };
 

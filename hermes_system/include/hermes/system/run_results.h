@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "hermes/core/metrics.h"
+#include "hermes/system/durability_report.h"
 #include "hermes/system/offline_run.h"
 
 namespace hermes::system {
@@ -40,12 +41,14 @@ struct RunResults {
   std::optional<LoopAccuracy> loop_accuracy;
   std::map<std::string, std::size_t> loops_per_pair;  ///< "a-b" -> accepted loops
   std::vector<std::string> warnings;                  ///< e.g. an agent that could not be evaluated
+  std::optional<DurabilitySummary> durability;        ///< with a server checkpoint directory
 };
 
 /// Evaluates the finished run and fills the metrics (no files).
 RunResults evaluateRun(const OfflineRun& run);
 
-/// metrics.json: the DESIGN §7 metrics plus "loop_accuracy", "loops_per_pair", "warnings".
+/// metrics.json: the DESIGN §7 metrics plus "loop_accuracy", "loops_per_pair", "warnings",
+/// and with checkpoints "server_durability" and "server_restarts" (durability_report.h).
 nlohmann::json resultsJson(const RunResults& results);
 
 /// Writes every file listed above except config_used.yaml. Errors name the file.

@@ -38,6 +38,11 @@ struct ClockParams {
   double server_period_s = 0.5;  ///< [s] the server merges its queue this often
   double sample_period_s = 1.0;  ///< [s] bandwidth CSV interval
   double drain_s = 60;           ///< [s] after the last frame, time allowed to deliver the rest
+  /// [s] simulated times at which the server object is destroyed without a
+  /// clean shutdown and, server_downtime_s later, created again from its
+  /// checkpoint directory (`hermes run --server-restart-at S`).
+  std::vector<double> server_restart_at;
+  double server_downtime_s = 1.0;  ///< [s] no server between destruction and re-creation
 
   Status read(const Config& config);
   Status validate() const;

@@ -39,6 +39,8 @@ class TimingStats {
   /// interpolation between closest ranks, like numpy's default).
   std::map<std::string, StageTiming> summary() const;
   size_t count(const std::string& stage) const;
+  /// Every sample per stage, in the order added (checkpoints keep them).
+  const std::map<std::string, std::vector<double>>& samples() const { return samples_; }
 
  private:
   std::map<std::string, std::vector<double>> samples_;

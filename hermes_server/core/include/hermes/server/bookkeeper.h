@@ -43,6 +43,10 @@
 #include "hermes/core/status.h"
 
 namespace hermes {
+namespace server {
+class ByteReader;
+class ByteWriter;
+}  // namespace server
 
 using RobotId = std::uint32_t;
 
@@ -150,6 +154,11 @@ class Bookkeeper {
   const BookkeeperParams& params() const { return params_; }
   /// "agent 1 (uuid ...)" for messages.
   std::string describe(RobotId robot) const;
+
+  /// Checkpoint (server_checkpoint.h): agents, sessions, accepted and applied seqs, world.
+  void save(server::ByteWriter* w) const;
+  /// Into a bookkeeper that has seen nothing yet; the error names what is damaged.
+  Status load(server::ByteReader* r);
 
  private:
   struct SeqTracker {

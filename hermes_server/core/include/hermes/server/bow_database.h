@@ -41,6 +41,10 @@ class BowDatabase {
   std::vector<std::pair<KeyframeKey, double>> score(
       const BowVector& query, const std::function<bool(const KeyframeKey&)>& accept = nullptr) const;
 
+  /// The stored keys in insertion-slot order (the order score() reports them in):
+  /// adding them again in this order reproduces the database's answers.
+  std::vector<KeyframeKey> keysInSlotOrder() const;
+
   /// All entries, ordered by key (agent, session, id).
   const std::map<KeyframeKey, BowEntry>& entries() const { return entries_; }
 

@@ -28,6 +28,10 @@
 #include "hermes/server/bookkeeper.h"
 
 namespace hermes {
+namespace server {
+class ByteReader;
+class ByteWriter;
+}  // namespace server
 
 struct CredibilityParams {
   bool enabled = true;        ///< server.csa: on (credibility order) | off (FIFO)
@@ -96,6 +100,14 @@ class CredibilityAssessor {
   const std::deque<PopRecord>& history() const { return history_; }
   void setLogger(std::function<void(const PopRecord&)> logger) { logger_ = std::move(logger); }
   const CredibilityParams& params() const { return params_; }
+  /// The waiting submaps, per agent in arrival order.
+  std::vector<PendingSubmap> pending() const;
+
+  /// Checkpoint (server_checkpoint.h): the waiting submaps, merge order and
+  /// history (evidence is refreshed from the bookkeeper before every pop).
+  void save(server::ByteWriter* w) const;
+  /// Into an empty queue; false on damaged input.
+  bool load(server::ByteReader* r);
 
  private:
   struct Queued {

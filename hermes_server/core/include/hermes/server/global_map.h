@@ -4,9 +4,11 @@
 // and the loop edges. Landmarks follow their anchor keyframe (the keyframe of
 // their first observation): p_W = T_W_C(anchor) * p_C.
 //
-// Binary file (save/load): "HGMP" magic, version, trajectory blocks (ids, anchor,
-// optimised poses, the trajectory as one wire-format submap frame), loop edges,
-// CRC-32 of everything before it.
+// Binary file (save/load): "HGMP" magic, version 2, every trajectory field by field
+// (keyframes with keypoints, descriptors and landmark links, landmarks with their
+// anchors and observations, odometry edges), loop edges with their PCM verdicts
+// and inliers, CRC-32 of everything before it. Lossless: a map saved and loaded
+// holds exactly what it held (the server checkpoint embeds it).
 #pragma once
 
 #include <cstdint>

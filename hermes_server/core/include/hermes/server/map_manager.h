@@ -25,6 +25,9 @@
 namespace hermes {
 namespace server {
 
+class ByteReader;
+class ByteWriter;
+
 struct MapManagerParams {
   PlaceRecognitionParams place_recognition;  ///< server.place_recognition.*
   LoopClosureParams loop_closure;            ///< server.loop_closure.*
@@ -126,6 +129,13 @@ class MapManager {
   bool hasLoops(RobotId robot) const;
   /// Agents (current sessions) anchored in the world frame.
   int agentsMerged() const;
+  /// Checkpoint (server_checkpoint.h): map, odometry chain, place database
+  /// order, loop ids, world trajectory, solve counters, timings. The PCM cache
+  /// is not kept (rebuilt on the next run, same verdicts).
+  void save(ByteWriter* w) const;
+  /// Into a manager that merged nothing yet; the error names what is damaged.
+  Status load(ByteReader* r);
+
   void setCandidateHook(CandidateHook h) { candidate_hook_ = std::move(h); }
   void setLoopHook(LoopHook h) { loop_hook_ = std::move(h); }
   void setAttemptHook(AttemptHook h) { attempt_hook_ = std::move(h); }

@@ -46,6 +46,9 @@
 namespace hermes {
 namespace server {
 
+class ByteReader;
+class ByteWriter;
+
 struct PcmParams {
   double chi2_probability = 0.99;  ///< consistency gate: chi2 quantile of this probability
   int exact_max_loops = 40;        ///< exact maximum clique up to this many loops per group (<= 64)
@@ -91,6 +94,11 @@ class OdometryChain {
   /// Grows whenever the odometry between two existing keyframes may have
   /// changed (a keyframe inserted between others); appending does not.
   std::uint64_t revision() const { return revision_; }
+
+  /// Checkpoint (server_checkpoint.h): the whole chain, revision included.
+  void save(ByteWriter* w) const;
+  /// Into an empty chain; false on damaged input.
+  bool load(ByteReader* r);
 
  private:
   struct Entry {

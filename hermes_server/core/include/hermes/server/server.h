@@ -1,19 +1,33 @@
 // The ROS-free edge server pipeline (DESIGN.md §5): one door for frames
 // (decode, dedup, bookkeeping via SubmapReceiver), a credibility-ordered queue
 // of accepted submaps, and the MapManager that merges them.
+//
+// Durability (DESIGN.md §9, server.checkpoint_dir set; checkpoint_store.h):
+// an accepted submap is written to the journal before onFrame() says to
+// acknowledge it (a failed write: not acknowledged, the agent resends), and
+// after merges (at most every checkpoint_period_s) the whole state is written
+// as a checkpoint, which makes the journal entries it covers redundant. create()
+// resumes from the newest readable checkpoint (a damaged or other-version one is
+// refused with a reason and the previous one used; none usable is an error,
+// never a silent empty start), then queues again what the journal holds beyond
+// it. Agents resend what was never acknowledged; the restored bookkeeper drops
+// what it had already accepted: nothing lost, nothing applied twice.
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "hermes/core/config.h"
 #include "hermes/core/keyring.h"
 #include "hermes/core/metrics.h"
 #include "hermes/server/admission.h"
 #include "hermes/server/bookkeeper.h"
+#include "hermes/server/checkpoint_store.h"
 #include "hermes/server/credibility.h"
 #include "hermes/server/map_manager.h"
 #include "hermes/server/submap_receiver.h"
@@ -27,6 +41,7 @@ struct ServerParams {
   MapManagerParams map;           ///< server.place_recognition.*, server.loop_closure.*, ...
   AuthParams auth;                ///< server.auth.*
   QueueParams queue;              ///< server.queue.*
+  CheckpointParams checkpoint;    ///< server.checkpoint_dir, server.checkpoint_period_s, ...
   Status read(const Config& config, const std::string& prefix = "server.");
   Status validate() const;
   void write(ConfigWriter& out, const std::string& prefix = "server.") const;
@@ -41,11 +56,33 @@ struct ServerCounters {
   std::string last_error;
 };
 
+/// Checkpoints and restarts, accumulated over the server's whole life (kept in
+/// the checkpoint).
+struct DurabilityStats {
+  std::size_t checkpoints = 0, checkpoint_errors = 0;
+  std::size_t last_checkpoint_bytes = 0;
+  std::size_t journal_errors = 0;    ///< accepted frames not acknowledged: journal write failed
+  std::size_t resumes = 0;           ///< starts from a checkpoint and/or journal
+  std::size_t journal_replayed = 0;  ///< submaps queued again from the journal on resume
+  std::size_t refused_files = 0;     ///< checkpoint / journal files refused on resume
+  std::string last_error;
+};
+
+/// What the last create() resumed from.
+struct ResumeReport {
+  bool resumed = false;              ///< a checkpoint or journal entries were loaded
+  std::string checkpoint;            ///< file used (empty: none, journal only or fresh)
+  std::vector<std::string> problems; ///< refused files, each with its reason
+  double load_ms = 0;                ///< wall time of reading and restoring [ms]
+  std::size_t journal_replayed = 0, journal_covered = 0;
+};
+
 class Server {
  public:
   /// Loads the vocabulary (relative paths resolved against base_dir) and, with
   /// params.auth.enabled, the keyring: `keyring` when given, else the key
-  /// directory params.auth.key_dir ("~/" expanded).
+  /// directory params.auth.key_dir ("~/" expanded). With a checkpoint
+  /// directory, resumes from it (see the top of this file).
   static Expected<std::unique_ptr<Server>> create(const ServerParams& params,
                                                   const std::string& base_dir,
                                                   std::optional<Keyring> keyring = std::nullopt);
@@ -72,11 +109,33 @@ class Server {
   /// What the server holds for a robot awaiting merge (nullptr: nothing ever).
   const HeldLoad* heldLoad(RobotId robot) const { return quotas_.load(robot); }
   const ServerCounters& counters() const { return counters_; }
-  /// Map-manager stages plus "submap" (whole merge incl. queue handling) [ms].
+  /// Map-manager stages plus "submap" (whole merge incl. queue handling) and
+  /// "checkpoint" (state encoded and written) [ms].
   TimingStats timings() const;
   const ServerParams& params() const { return params_; }
 
+  /// Writes a checkpoint now (clean shutdown; process() does it after merges).
+  /// Without a checkpoint directory: Ok, nothing written.
+  Status checkpoint(double now);
+  const DurabilityStats& durability() const { return durability_; }
+  const ResumeReport& resumeReport() const { return resume_; }
+  /// The whole state as a checkpoint body, and back (into a server that has
+  /// seen nothing; all or nothing: on error the server must be discarded).
+  std::vector<std::uint8_t> saveState() const;
+  Status loadState(const std::vector<std::uint8_t>& body);
+
  private:
+  struct Pending {
+    ReceivedSubmap submap;
+    std::vector<std::uint8_t> frame;  ///< as received (for checkpoints; empty if not via onFrame)
+  };
+  /// create() with a checkpoint directory.
+  static Expected<std::unique_ptr<Server>> resume(const ServerParams& params,
+                                                  std::shared_ptr<const Vocabulary> vocabulary,
+                                                  const std::optional<Keyring>& keyring);
+  ReceiveResult receiveJournaled(const std::uint8_t* data, std::size_t size,
+                                 const SubmapHeader* claimed, double now);
+
   ServerParams params_;
   std::optional<Keyring> keyring_;
   RobotQuotas quotas_;
@@ -84,10 +143,18 @@ class Server {
   CredibilityAssessor queue_;
   MapManager map_;
   SubmapReceiver receiver_;
-  std::map<std::uint64_t, ReceivedSubmap> stored_;
+  std::map<std::uint64_t, Pending> stored_;
   std::uint64_t next_handle_ = 0;
   ServerCounters counters_;
   TimingStats timings_;
+  std::optional<CheckpointStore> store_;
+  std::vector<SubmapHeader> journaled_;  ///< journal entries no checkpoint covers yet
+  std::deque<std::vector<SubmapHeader>> covered_;  ///< entries first covered by each newer checkpoint
+  const std::uint8_t* receiving_ = nullptr;  ///< frame inside onFrame (for the sink)
+  std::size_t receiving_size_ = 0;
+  double last_checkpoint_ = -1e300;
+  DurabilityStats durability_;
+  ResumeReport resume_;
 };
 
 }  // namespace server

@@ -85,6 +85,8 @@ class SubmapReceiver {
   ReceiveResult receive(const std::uint8_t* data, std::size_t size, const SubmapHeader* claimed,
                         double now);
   const ReceiverStats& stats() const { return stats_; }
+  /// Counters of a checkpoint the server resumed from.
+  void restoreStats(const ReceiverStats& stats) { stats_ = stats; }
 
  private:
   /// The tag check; empty when the frame may go on, else why it may not.

@@ -1,0 +1,17 @@
+// The offline runner over the rendered hall (rendered_hall.h): one agent per
+// hall sequence, spools under the test temp dir.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "hermes/system/offline_run.h"
+
+namespace hermes::test_support {
+
+/// Spools in <test temp dir>/hermes_offline_<tag>/spool. Null (with a gtest
+/// failure) when rendering or opening a dataset failed.
+std::unique_ptr<system::OfflineRun> makeHallRun(const system::SystemParams& params,
+                                                const std::string& tag);
+
+}  // namespace hermes::test_support
