@@ -36,8 +36,8 @@ mkdir -p "$CACHE"
 if [[ ! -f "$CACHE/done" ]]; then
   echo "[realtime] rendering ${DURATION} s of stereo (20 Hz) and RGB-D (30 Hz), writing bags ..." >&2
   GT="$ROOT/config/trajectories"
-  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_01_easy.txt" --out "$CACHE/euroc" --duration "$DURATION" --rate 20 --seed 1 >/dev/null
-  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_02_easy.txt" --out "$CACHE/tum" --format tum --duration "$DURATION" --rate 30 --seed 2 >/dev/null
+  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_01_easy.txt" --out "$CACHE/euroc" --duration "$DURATION" --rate 20 --seed 1 >/dev/null 2>&1
+  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_02_easy.txt" --out "$CACHE/tum" --format tum --duration "$DURATION" --rate 30 --seed 2 >/dev/null 2>&1
   "$BUILD/bin/hermes_dataset_to_bag" --dataset "$CACHE/euroc/MH_01_easy" --out "$CACHE/euroc.bag" --layout euroc 2>/dev/null
   "$BUILD/bin/hermes_dataset_to_bag" --dataset "$CACHE/tum/MH_02_easy" --out "$CACHE/tum.bag" --layout tum 2>/dev/null
   touch "$CACHE/done"
@@ -74,7 +74,8 @@ run_one() {
 </launch>
 EOF
   echo "[realtime] $name: playing the ${DURATION}-s bag at 1.0x into one Agent nodelet ..." >&2
-  if ! rostest --text "$WORK/$name.test" > "$WORK/$name.log" 2>&1; then
+  if ! rostest --pkgdir="$ROOT/test" --package=hermes_tests --text "$WORK/$name.test" \
+       > "$WORK/$name.log" 2>&1; then
     echo "[realtime] $name: rostest reported a failure (see $WORK/$name.log with --keep); its numbers are still reported" >&2
   fi
   [[ -s "$WORK/$name.json" ]] || { echo "bench realtime: $name wrote no report; log tail:" >&2; tail -20 "$WORK/$name.log" >&2; exit 1; }
