@@ -70,38 +70,45 @@ class ExactClique {
   std::vector<int> best_;
 };
 
+/// The greedy heuristic on adjacency bitsets: the same choices as counting
+/// neighbours pair by pair (ties to the lowest index), n/64 times fewer steps
+/// (a whole-mission group of 800 loops took minutes per merge counted plainly).
 std::vector<int> greedyClique(const std::vector<std::vector<char>>& adj) {
   const int n = static_cast<int>(adj.size());
+  const int words = (n + 63) / 64;
+  using Bits = std::vector<std::uint64_t>;
+  std::vector<Bits> nbr(n, Bits(words, 0));  // row i: j with adj[i][j], never i itself
   std::vector<int> degree(n, 0);
   for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) degree[i] += (i != j && adj[i][j]);
+    for (int j = 0; j < n; ++j) {
+      if (i == j || !adj[i][j]) continue;
+      nbr[i][j >> 6] |= std::uint64_t{1} << (j & 63);
+      ++degree[i];
+    }
   }
+  auto common = [words](const Bits& a, const Bits& b) {
+    int c = 0;
+    for (int w = 0; w < words; ++w) c += __builtin_popcountll(a[w] & b[w]);
+    return c;
+  };
   std::vector<int> best;
   for (int start = 0; start < n; ++start) {
     if (degree[start] + 1 <= static_cast<int>(best.size())) continue;
     std::vector<int> clique{start};
-    std::vector<int> cand;
-    for (int j = 0; j < n; ++j) {
-      if (j != start && adj[start][j]) cand.push_back(j);
-    }
-    while (!cand.empty()) {
+    Bits cand = nbr[start];
+    for (;;) {
       // Candidate with the most neighbours among the other candidates.
-      int best_k = 0, best_deg = -1;
-      for (std::size_t k = 0; k < cand.size(); ++k) {
-        int d = 0;
-        for (int c : cand) d += (c != cand[k] && adj[cand[k]][c]);
-        if (d > best_deg) {
-          best_deg = d;
-          best_k = static_cast<int>(k);
+      int v = -1, best_deg = -1;
+      for (int w = 0; w < words; ++w) {
+        for (std::uint64_t bits = cand[w]; bits; bits &= bits - 1) {
+          const int c = w * 64 + __builtin_ctzll(bits);
+          const int d = common(nbr[c], cand);
+          if (d > best_deg) best_deg = d, v = c;
         }
       }
-      const int v = cand[best_k];
+      if (v < 0) break;
       clique.push_back(v);
-      std::vector<int> next;
-      for (int c : cand) {
-        if (c != v && adj[v][c]) next.push_back(c);
-      }
-      cand.swap(next);
+      for (int w = 0; w < words; ++w) cand[w] &= nbr[v][w];
     }
     if (clique.size() > best.size()) best = clique;
   }
