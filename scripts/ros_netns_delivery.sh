@@ -220,6 +220,24 @@ start_agent() {  # start_agent <log> <clear_spool>
     "robot:=$ROBOT" "dataset:=$DATA" "rate:=$RATE" "start_delay:=2.0" "spool_dir:=$SPOOL" \
     "clear_spool:=$2" "config:=$LOGS/config.yaml" "key_file:=$LOGS/keys/$ROBOT.key"
 }
+# roslaunch itself (before any Hermes node) can fail to reach the master through the
+# lossy link ("could not contact master"): that is the tool, not the agent under
+# test, so a start is tried again (at most 3 times, each logged). Sets G_AGENT.
+launch_agent() {  # launch_agent <run name> <log> <clear_spool>
+  local try
+  for try in 1 2 3; do
+    G_AGENT=$(start_agent "$2" "$3"); PGIDS+=("$G_AGENT")
+    log "agent $1 started (pgid $G_AGENT, clear_spool:=$3, rate $RATE, loss $LOSS % both directions, try $try)"
+    for _ in $(seq 150); do  # 15 s: roslaunch has reached the master or given up by then
+      grep -q "could not contact master" "$2" 2>/dev/null && break
+      grep -q "process\[" "$2" 2>/dev/null && break
+      sleep 0.1
+    done
+    grep -q "could not contact master" "$2" 2>/dev/null || return 0
+    log "agent $1: roslaunch could not contact the master through the lossy link; starting it again"
+    cp "$2" "${2%.log}_try$try.log"
+  done
+}
 died() { grep -c "process has died" "$1" 2>/dev/null || true; }
 at() {  # at <seconds after T0 (the first submap)>
   local now; now=$(awk -v a="$T0" -v b="$(date +%s.%N)" 'BEGIN{print b-a}')
@@ -233,8 +251,7 @@ agent_field() {  # agent_field <python expression on s (agent state)>
 }
 
 T0=$(date +%s.%N)
-G_AGENT1=$(start_agent "$LOGS/agent_run1.log" true); PGIDS+=("$G_AGENT1")
-log "agent run 1 started (pgid $G_AGENT1, clear_spool:=true, rate $RATE, loss $LOSS % both directions)"
+launch_agent "run 1" "$LOGS/agent_run1.log" true; G_AGENT1=$G_AGENT
 for _ in $(seq 600); do
   [[ "$(agent_field "$CREATED")" =~ ^[1-9] ]] && break
   kill -0 "$G_AGENT1" 2>/dev/null || fail "agent run 1 exited: $(tail -5 "$LOGS/agent_run1.log")"
@@ -263,21 +280,7 @@ log "SIGKILL to the agent's roslaunch and its nodes (pids $KILLED; spool pending
 for _ in $(seq 50); do [[ -z "$(alive $KILLED)" ]] && break; sleep 0.1; done
 [[ -z "$(alive $KILLED)" ]] || fail "agent processes $(alive $KILLED) survived SIGKILL"
 sleep "$RESTART_DELAY"
-# roslaunch itself (before any Hermes node) can fail to reach the master through the
-# lossy link ("could not contact master"): that is the tool, not the agent under
-# test, so the restart is tried again (at most 3 times, each logged).
-for try in 1 2 3; do
-  G_AGENT2=$(start_agent "$LOGS/agent_run2.log" "$RESTART_CLEAR"); PGIDS+=("$G_AGENT2")
-  log "agent run 2 started (pgid $G_AGENT2, same spool, clear_spool:=$RESTART_CLEAR, try $try)"
-  for _ in $(seq 150); do  # 15 s: roslaunch has reached the master or given up by then
-    grep -q "could not contact master" "$LOGS/agent_run2.log" 2>/dev/null && break
-    grep -q "process\[" "$LOGS/agent_run2.log" 2>/dev/null && break
-    sleep 0.1
-  done
-  grep -q "could not contact master" "$LOGS/agent_run2.log" 2>/dev/null || break
-  log "agent run 2: roslaunch could not contact the master through the lossy link; starting it again"
-  cp "$LOGS/agent_run2.log" "$LOGS/agent_run2_try$try.log"
-done
+launch_agent "run 2" "$LOGS/agent_run2.log" "$RESTART_CLEAR"; G_AGENT2=$G_AGENT
 
 # Wait for run 2 to finish its sequence, its spool to drain and the server to apply it all.
 "$PY" - "$LOGS/agent_state.json" "$LOGS/server_state.json" "$DRAIN_TIMEOUT" "$RATE" <<'PY' >&2 || true
