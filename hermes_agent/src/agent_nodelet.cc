@@ -30,7 +30,9 @@
 // /tmp/hermes_spool/<robot>), clear_spool (false: unacked submaps of a
 // previous run are resent), parallel (true: local BA and the window step run
 // on the pipeline's worker threads, so tracking never waits for them; false:
-// inside the image callback, as the offline runner does), auth (frames tagged
+// inside the image callback, as the offline runner does), timing_window
+// (uplink_status timings over each stage's last N samples; default
+// agent.timing_window, or 3000 when that is 0), auth (frames tagged
 // with the robot's key; default: uplink.auth.enabled, agent.launch sets true),
 // key_file (default: uplink.auth.key_file, ~/.config/hermes/keys/<robot>.key;
 // missing or not private: the nodelet does not start). The uplink runs on
@@ -126,6 +128,9 @@ class AgentNodelet : public nodelet::Nodelet {
     // threads, agent_threads.h); ~parallel false runs them inside the image
     // callback as the offline runner does.
     pnh.param("parallel", params_.threads.parallel, true);
+    // uplink_status is summarised every second for hours: over a bounded window.
+    pnh.param("timing_window", params_.threads.timing_window,
+              params_.threads.timing_window > 0 ? params_.threads.timing_window : 3000);
     pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
     // Frame authentication: ~auth (launch default true) and ~key_file override
     // uplink.auth.*; the key is checked now, not at the first frame.
@@ -511,7 +516,7 @@ class AgentNodelet : public nodelet::Nodelet {
                     {"windows_queued", t.windows.pushed},
                     {"windows_merged", t.windows.merged},
                     {"window_queue_high_water", t.windows.high_water}};
-    nlohmann::json timings = nlohmann::json::object();  // [ms] per stage since start
+    nlohmann::json timings = nlohmann::json::object();  // [ms] per stage, last timing_window samples
     for (const auto& [stage, st] : pipeline_->timings().summary())
       timings[stage] = {{"median", st.median}, {"p95", st.p95}, {"count", st.count}};
     j["timings_ms"] = timings;

@@ -13,18 +13,34 @@ using nlohmann::json;
 
 // ---------------------------------------------------------------- timings
 
-void TimingStats::add(const std::string& stage, double ms) { samples_[stage].push_back(ms); }
+void TimingStats::add(const std::string& stage, double ms) {
+  samples_[stage].push_back(ms);
+  trim(stage);
+}
+
+void TimingStats::trim(const std::string& stage) {
+  // Amortised O(1): the oldest are dropped in one go once 2 W samples are held.
+  auto& v = samples_[stage];
+  if (window_ == 0 || v.size() < 2 * window_) return;
+  const size_t drop = v.size() - window_;
+  v.erase(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(drop));
+  dropped_[stage] += drop;
+}
 
 void TimingStats::merge(const TimingStats& other) {
   for (const auto& [stage, v] : other.samples_) {
     auto& dst = samples_[stage];
     dst.insert(dst.end(), v.begin(), v.end());
+    trim(stage);
   }
+  for (const auto& [stage, n] : other.dropped_) dropped_[stage] += n;
 }
 
 size_t TimingStats::count(const std::string& stage) const {
   auto it = samples_.find(stage);
-  return it == samples_.end() ? 0 : it->second.size();
+  if (it == samples_.end()) return 0;
+  auto d = dropped_.find(stage);
+  return it->second.size() + (d == dropped_.end() ? 0 : d->second);
 }
 
 double timing::percentile(std::vector<double> v, double q) {
@@ -40,7 +56,10 @@ std::map<std::string, StageTiming> TimingStats::summary() const {
   std::map<std::string, StageTiming> out;
   for (const auto& [stage, v] : samples_) {
     if (v.empty()) continue;
-    out[stage] = {timing::percentile(v, 50), timing::percentile(v, 95), int64_t(v.size())};
+    const size_t keep = window_ == 0 ? v.size() : std::min(v.size(), window_);
+    const std::vector<double> recent(v.end() - static_cast<std::ptrdiff_t>(keep), v.end());
+    out[stage] = {timing::percentile(recent, 50), timing::percentile(recent, 95),
+                  int64_t(count(stage))};
   }
   return out;
 }

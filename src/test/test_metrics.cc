@@ -73,6 +73,28 @@ TEST(TimingStats, MedianAndP95) {
   EXPECT_DOUBLE_EQ(timing::percentile({7}, 95), 7.0);
 }
 
+TEST(TimingStats, AWindowSummarisesTheLastSamplesWithBoundedMemory) {
+  TimingStats ts(100);
+  for (int i = 1; i <= 10000; ++i) ts.add("track", i < 9901 ? 1000.0 : double(i - 9900));
+  // The last 100 samples are 1..100: the 9900 slow ones before them are out of the window.
+  const auto s = ts.summary();
+  EXPECT_DOUBLE_EQ(s.at("track").median, 50.5);
+  EXPECT_NEAR(s.at("track").p95, 95.05, 1e-12);
+  EXPECT_EQ(s.at("track").count, 10000);  // every sample counted
+  EXPECT_EQ(ts.count("track"), 10000u);
+  EXPECT_LT(ts.samples().at("track").size(), 200u);  // below 2 W held
+  EXPECT_GE(ts.samples().at("track").size(), 100u);
+  // Merging into a windowed one keeps the window and the counts.
+  TimingStats other;
+  for (int i = 0; i < 500; ++i) other.add("track", 7.0);
+  TimingStats copy = ts;
+  copy.merge(other);
+  EXPECT_EQ(copy.window(), 100u);
+  EXPECT_DOUBLE_EQ(copy.summary().at("track").median, 7.0);
+  EXPECT_EQ(copy.count("track"), 10500u);
+  EXPECT_LT(copy.samples().at("track").size(), 200u);
+}
+
 TEST(MetricsJson, ContractKeysAlwaysPresentNullWhenNotApplicable) {
   RunMetrics empty;
   AgentMetrics a;

@@ -46,7 +46,9 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
       T_C_B_(camera.T_B_C.inverse()),
       tracker_(params.tracker, camera.K, camera.baseline),
       distiller_(std::move(distiller)),
-      monitor_(params.uplink.monitor) {
+      monitor_(params.uplink.monitor),
+      timings_(static_cast<std::size_t>(params.threads.timing_window)),
+      stage_timings_(static_cast<std::size_t>(params.threads.timing_window)) {
   // Agent identity in the window headers: a stable id from the agent's name.
   agent_id_ = agentUuid(name);
   setWindowIdentity(tracker_, agent_id_, session_);

@@ -31,19 +31,31 @@ struct StageTiming {
 };
 
 /// Collects durations per stage. Not thread-safe: keep one per thread and merge().
+///
+/// By default every sample is kept (offline runs: exact statistics over the run).
+/// With a window of W > 0 samples per stage (a live process that runs for hours
+/// and summarises often), median and p95 are over the stage's last W samples and
+/// memory stays below 2 W samples per stage; count is still every sample added.
 class TimingStats {
  public:
+  explicit TimingStats(size_t window = 0) : window_(window) {}
   void add(const std::string& stage, double ms);
   void merge(const TimingStats& other);
   /// Median (mean of the two middle values for even counts) and p95 (linear
-  /// interpolation between closest ranks, like numpy's default).
+  /// interpolation between closest ranks, like numpy's default); count = all added.
   std::map<std::string, StageTiming> summary() const;
   size_t count(const std::string& stage) const;
-  /// Every sample per stage, in the order added (checkpoints keep them).
+  size_t window() const { return window_; }
+  /// The samples kept per stage, in the order added (all of them without a
+  /// window; checkpoints keep them).
   const std::map<std::string, std::vector<double>>& samples() const { return samples_; }
 
  private:
+  void trim(const std::string& stage);
+
+  size_t window_ = 0;
   std::map<std::string, std::vector<double>> samples_;
+  std::map<std::string, size_t> dropped_;  ///< samples trimmed away per stage (window only)
 };
 
 namespace timing {

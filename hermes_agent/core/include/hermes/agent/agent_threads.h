@@ -28,8 +28,12 @@ struct AgentThreadParams {
   /// while the queue is full is merged into the newest waiting window
   /// (mergeWindows: one submap standing for both periods), never dropped.
   int window_queue = 2;
+  /// Stage timings summarised over each stage's last N samples (agent.timing_window);
+  /// 0 keeps every sample (offline runs). A live agent summarises every second for
+  /// hours: a window bounds memory and the cost of each summary.
+  int timing_window = 0;
 
-  /// Keys agent.parallel and agent.window_queue (missing keys keep defaults).
+  /// Keys agent.parallel, agent.window_queue, agent.timing_window (missing keys keep defaults).
   Status read(const Config& config);
   void write(ConfigWriter* writer) const;
   Status validate() const;
