@@ -24,6 +24,13 @@ double msSince(Clock::time_point t0) {
 
 }  // namespace
 
+bool inTrouble(const Submap& window, const TrackingHealth& health, const DistillParams& params) {
+  if (!params.trouble_aware) return false;
+  if (health.lost > 0 || health.weak >= params.trouble_weak_frames) return true;
+  return std::any_of(window.keyframes.begin(), window.keyframes.end(),
+                     [&](const Keyframe& kf) { return kf.lost_before && kf.stamp >= window.header.t_start; });
+}
+
 Distiller::Distiller(const DistillParams& params, EncodedSizeFn size_fn)
     : params_(params), size_fn_(std::move(size_fn)), model_(params) {
   auto sel = makeLandmarkSelector(params.strategy, params);
@@ -66,8 +73,18 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     return res;
   }
   const bool budgeted = params_.coordinator && params_.strategy != "none";
-  rep.budget_bytes = params_.coordinator ? budgetBytes(params_, input)
-                                         : std::numeric_limits<double>::infinity();
+  // A window in trouble keeps more keyframes and plans with more of the link
+  // (DistillParams::trouble_*); raw streaming keeps everything anyway.
+  rep.trouble = params_.strategy != "none" && inTrouble(window, hint.health, params_);
+  DistillParams troubled = params_;
+  CoordinatorInput link = input;
+  if (rep.trouble) {
+    troubled.max_keyframes = params_.trouble_max_keyframes;
+    link.bandwidth_Bps *= params_.trouble_budget_gain;  // the backlog still counts in full
+  }
+  const DistillParams& prm = troubled;
+  rep.budget_bytes = prm.coordinator ? budgetBytes(prm, link)
+                                     : std::numeric_limits<double>::infinity();
   auto measure = [&](const Submap& s) {
     const auto t0 = Clock::now();
     const double pred = model_.predict(static_cast<double>(s.keyframes.size()),
@@ -114,10 +131,10 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   }
 
   // Plan (N_KF, K).
-  int n_kf = std::min<int>(params_.max_keyframes, static_cast<int>(window.keyframes.size()));
-  int k = params_.fixed_k;
+  int n_kf = std::min<int>(prm.max_keyframes, static_cast<int>(window.keyframes.size()));
+  int k = prm.fixed_k;
   if (budgeted) {
-    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, kept_, params_);
+    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, kept_, prm);
     if (plan.defer) {
       rep.deferred = true;
       rep.defer_reason = plan.reason;
@@ -130,18 +147,18 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   }
 
   auto t0 = Clock::now();
-  const TrimResult trim = trimKeyframes(window, n_kf, params_);
+  const TrimResult trim = trimKeyframes(window, n_kf, prm);
   const Submap trimmed = applyKeyframeTrim(window, trim.kept);
   rep.trim_status = toString(trim.status);
   rep.time_trim_ms = msSince(t0);
   if (budgeted && !trimmed.keyframes.empty()) {  // K for the keyframes really kept
-    const CoordinatorPlan plan = chooseK(trimmed, rep.budget_bytes, model_, kept_, params_);
+    const CoordinatorPlan plan = chooseK(trimmed, rep.budget_bytes, model_, kept_, prm);
     k = plan.k;
     rep.bytes_planned = plan.predicted_bytes;
   }
 
   t0 = Clock::now();
-  const LandmarkScores scores = computeScores(trimmed, hint, input.loop_closures, params_);
+  const LandmarkScores scores = computeScores(trimmed, hint, input.loop_closures, prm);
   rep.alpha = scores.weights.alpha;
   rep.beta = scores.weights.beta;
   rep.time_scores_ms = msSince(t0);
@@ -157,14 +174,14 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   Submap fit;
   std::vector<int> fit_selected;
   DistillReport fit_report;
-  for (int round = 1; round <= params_.max_rounds; ++round) {
+  for (int round = 1; round <= prm.max_rounds; ++round) {
     rep.rounds = round;
     rep.k = k;
     t0 = Clock::now();
     SelectionProblem prob =
-        buildSelectionProblem(trimmed, scores, k, s_lm, model_.cLm(), model_.cObs(), params_);
+        buildSelectionProblem(trimmed, scores, k, s_lm, model_.cLm(), model_.cObs(), prm);
     // All rounds together get the MILP time limit (each at least 10 ms).
-    prob.time_limit_s = std::max(0.01, params_.milp_time_limit_s - rep.time_select_ms * 1e-3);
+    prob.time_limit_s = std::max(0.01, prm.milp_time_limit_s - rep.time_select_ms * 1e-3);
     // The previous round's selection is a feasible start when K grew (same
     // landmark budget); after a shrink it no longer fits and the MILP ignores it.
     prob.warm_start = last_selected;
@@ -190,8 +207,8 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
       fit_selected = sel.selected;
       fit_report = rep;
       // Fits. If the byte model was pessimistic and K can grow, try a larger K.
-      if (bytes >= params_.fill_accept * rep.budget_bytes || k >= params_.k_max) break;
-      k = std::min(params_.k_max,
+      if (bytes >= prm.fill_accept * rep.budget_bytes || k >= prm.k_max) break;
+      k = std::min(prm.k_max,
                    static_cast<int>(std::ceil(k * std::min(2.0, rep.budget_bytes / bytes))));
       continue;
     }
@@ -202,7 +219,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     // The margin (1 % of S) keeps a budget-bound selection from overshooting by
     // a few bytes again when the refitted byte model barely moves.
     s_lm = s_lm - (bytes - rep.budget_bytes) * 1.05 - 0.01 * rep.budget_bytes;
-    if (next_k < params_.k_min || s_lm < 0) {
+    if (next_k < prm.k_min || s_lm < 0) {
       floor_hit = true;  // the floor is reached: defer rather than degrade further
       break;
     }
@@ -215,9 +232,9 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     rep.rounds = rounds;
     rep.time_select_ms = t_sel;
     rep.time_encode_ms = t_enc;
-    if (rep.k >= params_.k_max && input.link_keeps_up)
+    if (rep.k >= prm.k_max && input.link_keeps_up)
       addLoopKeypoints(trimmed, fit_selected, &fit, &rep);
-    else if (rep.k >= params_.k_max && input.link_unmeasured && params_.loop_keypoints > 0)
+    else if (rep.k >= prm.k_max && input.link_unmeasured && prm.loop_keypoints > 0)
       res.held_back = heldBackKeypoints(trimmed, fit_selected);
     return finish(std::move(fit));
   }
@@ -257,7 +274,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   std::ostringstream why;
   why << "encoded size " << (size_fn_ ? static_cast<double>(rep.bytes_actual) : rep.bytes_predicted)
       << " B still exceeds the budget " << rep.budget_bytes << " B after " << rep.rounds
-      << " round(s) at the floor K >= " << params_.k_min;
+      << " round(s) at the floor K >= " << prm.k_min;
   rep.defer_reason = why.str();
   rep.n_kf = static_cast<int>(out.keyframes.size());
   rep.n_lm = static_cast<int>(out.landmarks.size());

@@ -71,6 +71,10 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("trim_lambda", trim_lambda)
   HERMES_READ("trim_min_shared", trim_min_shared)
   HERMES_READ("trim_time_limit_s", trim_time_limit_s)
+  HERMES_READ_BOOL("trouble_aware", trouble_aware)
+  HERMES_READ("trouble_weak_frames", trouble_weak_frames)
+  HERMES_READ("trouble_max_keyframes", trouble_max_keyframes)
+  HERMES_READ("trouble_budget_gain", trouble_budget_gain)
   HERMES_READ("bytes_c0", bytes_c0)
   HERMES_READ("bytes_kf", bytes_kf)
   HERMES_READ("bytes_obs", bytes_obs)
@@ -96,6 +100,10 @@ Status DistillParams::validate() const {
   if (!(fill_accept > 0 && fill_accept <= plan_fill && plan_fill <= 1))
     return bad("plan_fill/fill_accept need 0 < fill_accept <= plan_fill <= 1");
   if (max_keyframes < 2) return bad("max_keyframes must be >= 2");
+  if (trouble_weak_frames < 1) return bad("trouble_weak_frames must be >= 1");
+  if (trouble_max_keyframes < max_keyframes)
+    return bad("trouble_max_keyframes must be >= max_keyframes");
+  if (!(trouble_budget_gain >= 1)) return bad("trouble_budget_gain must be >= 1");
   if (!(delta > 0)) return bad("delta must be > 0");
   if (alpha < 0 || beta < 0 || alpha + beta <= 0) return bad("alpha, beta must be >= 0, not both 0");
   if (alpha_per_loop < 0 || beta_per_rad < 0) return bad("alpha_per_loop/beta_per_rad must be >= 0");
@@ -145,6 +153,10 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "milp_time_limit_s", milp_time_limit_s);
   out->set(p + "milp_rel_gap", milp_rel_gap);
   out->set(p + "milp_warm_start", milp_warm_start);
+  out->set(p + "trouble_aware", std::string(trouble_aware ? "on" : "off"));
+  out->set(p + "trouble_weak_frames", trouble_weak_frames);
+  out->set(p + "trouble_max_keyframes", trouble_max_keyframes);
+  out->set(p + "trouble_budget_gain", trouble_budget_gain);
   out->set(p + "trim_w_rot", trim_w_rot);
   out->set(p + "trim_w_trans", trim_w_trans);
   out->set(p + "trim_lambda", trim_lambda);

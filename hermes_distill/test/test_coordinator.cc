@@ -223,6 +223,56 @@ TEST(Coordinator, ProbingSendsMore) {
   EXPECT_LE(static_cast<double>(probe.report.bytes_actual), probe.report.budget_bytes);
 }
 
+TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
+  SyntheticWindowParams wp;
+  wp.keyframe_period_s = 0.2;  // 25 keyframes in 5 s: fast motion
+  wp.seed = 5;
+  auto scene = makeSceneFromTum(testing::groundTruthPath("MH_04_difficult"), wp);
+  ASSERT_TRUE(scene.ok()) << scene.error();
+  const Expected<SyntheticWindow> w = scene->window(20.0, 1);
+  ASSERT_TRUE(w.ok()) << w.error();
+  ASSERT_GE(w->submap.keyframes.size(), 20u);
+  DistillParams p;
+  CoordinatorInput in;
+  in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (p.eta * p.window_s);
+  in.backlog_bytes = 1000;
+  MotionHint sound = w->hint, weak = w->hint, lost = w->hint;
+  sound.health = {125, 0, 2, 90};  // 2 weak frames: below trouble_weak_frames (3)
+  weak.health = {125, 0, 3, 40};
+  lost.health = {125, 1, 0, 120};
+  auto run = [&](const DistillParams& params, const MotionHint& hint) {
+    return Distiller(params, referenceEncodedSize).distill(w->submap, hint, in).report;
+  };
+  const DistillReport base = run(p, sound);
+  ASSERT_FALSE(base.deferred) << base.defer_reason;
+  EXPECT_FALSE(base.trouble);
+  EXPECT_LE(base.n_kf, p.max_keyframes);
+  for (const MotionHint& hint : {weak, lost}) {
+    const DistillReport t = run(p, hint);
+    ASSERT_FALSE(t.deferred) << t.defer_reason;
+    EXPECT_TRUE(t.trouble);
+    EXPECT_GT(t.n_kf, p.max_keyframes);
+    EXPECT_LE(t.n_kf, p.trouble_max_keyframes);
+    // The gain scales the link's share, not the backlog.
+    EXPECT_NEAR(t.budget_bytes + in.backlog_bytes,
+                p.trouble_budget_gain * (base.budget_bytes + in.backlog_bytes), 1e-6);
+    EXPECT_GT(t.bytes_actual, base.bytes_actual);
+    EXPECT_LE(static_cast<double>(t.bytes_actual), t.budget_bytes);
+  }
+  // A keyframe of the window that follows a loss puts it in trouble too.
+  Submap after_loss = w->submap;
+  after_loss.keyframes[5].lost_before = true;
+  EXPECT_TRUE(inTrouble(after_loss, sound.health, p));
+  EXPECT_FALSE(inTrouble(w->submap, sound.health, p));
+  // Switched off: the same as a sound window.
+  p.trouble_aware = false;
+  const DistillReport off = run(p, weak);
+  EXPECT_FALSE(off.trouble);
+  EXPECT_EQ(off.n_kf, base.n_kf);
+  EXPECT_DOUBLE_EQ(off.budget_bytes, base.budget_bytes);
+  EXPECT_FALSE(inTrouble(after_loss, lost.health, p));
+}
+
 TEST(Coordinator, SpareBudgetCarriesLoopKeypointsOnlyOnALinkThatKeepsUp) {
   const SyntheticWindow w = testing::window("V1_01_easy", 100.0);
   DistillParams p;

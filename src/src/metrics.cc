@@ -102,6 +102,8 @@ void to_json(json& j, const AgentMetrics& m) {
   if (m.held_submaps) j["held_submaps"] = *m.held_submaps;
   if (m.held_bytes) j["held_bytes"] = *m.held_bytes;
   if (m.held_bytes_peak) j["held_bytes_peak"] = *m.held_bytes_peak;
+  if (m.weak_frames) j["weak_frames"] = *m.weak_frames;
+  if (m.trouble_windows) j["trouble_windows"] = *m.trouble_windows;
 }
 
 void to_json(json& j, const RunMetrics& m) {
@@ -256,6 +258,8 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.held_submaps = r.integer("held_submaps", false);
   a.held_bytes = r.integer("held_bytes", false);
   a.held_bytes_peak = r.integer("held_bytes_peak", false);
+  a.weak_frames = r.integer("weak_frames", false);
+  a.trouble_windows = r.integer("trouble_windows", false);
   return a;
 }
 

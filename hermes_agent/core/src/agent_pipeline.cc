@@ -245,6 +245,8 @@ AgentMetrics AgentPipeline::metrics() const {
   m.bytes = w.bytes;
   m.submaps_sent = w.sent;
   m.submaps_deferred = w.deferred + w.refused;
+  m.weak_frames = tracker_.totalHealth().weak;
+  m.trouble_windows = w.trouble;
   return m;
 }
 

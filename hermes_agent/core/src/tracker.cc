@@ -25,6 +25,7 @@ Status TrackerParams::read(const Config& c) {
     if (!s) return s;
   for (auto [key, ptr] : {std::pair<const char*, int*>{"init_min_points", &init_min_points},
                           {"min_tracked", &min_tracked},
+                          {"weak_tracked", &weak_tracked},
                           {"local_map_keyframes", &local_map_keyframes},
                           {"relocalise_keyframes", &relocalise_keyframes}}) {
     Status s = c.get(std::string("tracker.") + key, ptr);
@@ -46,6 +47,7 @@ void TrackerParams::write(ConfigWriter* w) const {
   window.write(w);
   w->set("tracker.init_min_points", init_min_points);
   w->set("tracker.min_tracked", min_tracked);
+  w->set("tracker.weak_tracked", weak_tracked);
   w->set("tracker.local_map_keyframes", local_map_keyframes);
   w->set("tracker.relocalise_radius_px", relocalise_radius_px);
   w->set("tracker.relocalise_keyframes", relocalise_keyframes);
@@ -58,6 +60,7 @@ Status TrackerParams::validate() const {
   if (init_min_points < 4) return Error{"tracker.init_min_points must be >= 4"};
   if (min_tracked < pose.min_inliers)
     return Error{"tracker.min_tracked must be >= pose.min_inliers"};
+  if (weak_tracked < 0) return Error{"tracker.weak_tracked must be >= 0 (0 = never weak)"};
   if (local_map_keyframes < 1) return Error{"tracker.local_map_keyframes must be >= 1"};
   if (!(relocalise_radius_px > 0)) return Error{"tracker.relocalise_radius_px must be > 0"};
   if (relocalise_keyframes < 0) return Error{"tracker.relocalise_keyframes must be >= 0"};
@@ -339,6 +342,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
     r.status = status_;
     r.tracked = est.ok() ? est->num_inliers : 0;
     r.keyframe = policy_.decide(frame.left, TrackingState{false, r.tracked, reference_tracked_});
+    noteHealth(r);
     return r;
   }
 
@@ -381,7 +385,20 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
       landmark_angle_[id] = fs.angles[kp];
     }
   }
+  noteHealth(r);
   return r;
+}
+
+void Tracker::noteHealth(const TrackResult& r) {
+  for (distill::TrackingHealth* h : {&health_, &total_health_}) {
+    ++h->frames;
+    if (r.status != TrackingStatus::kOk) {
+      ++h->lost;
+      continue;
+    }
+    if (r.tracked < params_.weak_tracked) ++h->weak;
+    h->min_tracked = h->min_tracked == 0 ? r.tracked : std::min(h->min_tracked, r.tracked);
+  }
 }
 
 void Tracker::runLocalMapping(TrackResult* r, const std::vector<float>& scales) {
@@ -436,11 +453,14 @@ std::optional<Submap> Tracker::takeWindowIfDue(double t) {
   ++window_header_.seq;
   window_next_kf_ = last;
   window_last_t_ = t;
+  window_health_ = health_;
+  health_ = {};
   return s;
 }
 
 distill::MotionHint Tracker::motionHint() const {
   distill::MotionHint h;
+  h.health = window_health_;
   if (status_ != TrackingStatus::kOk || !have_velocity_) return h;
   h.valid = true;
   h.T_A_C = T_C_W_last_.inverse();

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 
 #include "frontend_synthetic.h"
 #include "hermes/agent/tracker.h"
@@ -93,7 +94,8 @@ struct GapRun {
   std::vector<TrackingStatus> status;
   double err_last = 1e9;
 };
-GapRun runBlankGap(int blank_from, int blank_to, int frames, const TrackerParams& params) {
+GapRun runBlankGap(int blank_from, int blank_to, int frames, const TrackerParams& params,
+                   const std::function<void(Tracker&)>& at_end = {}) {
   GapRun out;
   auto scene = test::roomCornerScene();
   if (scene.empty()) return out;
@@ -120,6 +122,7 @@ GapRun runBlankGap(int blank_from, int blank_to, int frames, const TrackerParams
     if (r->status == TrackingStatus::kOk)
       out.err_last = (r->T_W_C.translation() - (T_C0_W * test::roomGroundTruth(k)).translation()).norm();
   }
+  if (at_end) at_end(tracker);
   return out;
 }
 }  // namespace
@@ -133,6 +136,33 @@ TEST(Tracker, LostOnBlankFramesThenRelocalises) {
   EXPECT_EQ(g.status[9], TrackingStatus::kOk) << "relocalisation against the local map";
   EXPECT_EQ(g.status.back(), TrackingStatus::kOk);
   EXPECT_LT(g.err_last, 0.01);
+}
+
+TEST(Tracker, CountsLostAndWeakFramesPerWindowForTheDistiller) {
+  TrackerParams params;
+  params.weak_tracked = 1000000;  // every tracked frame is weak
+  distill::TrackingHealth total, window, next;
+  const GapRun g = runBlankGap(7, 8, 16, params, [&](Tracker& t) {
+    total = t.totalHealth();
+    ASSERT_TRUE(t.takeWindowIfDue(100.0).has_value());
+    window = t.motionHint().health;
+    EXPECT_FALSE(t.takeWindowIfDue(200.0).has_value());  // no new keyframe: no window
+    next = t.motionHint().health;
+  });
+  ASSERT_EQ(g.status.size(), 16u) << "opencv-doc photos missing";
+  EXPECT_EQ(total.frames, 15);  // the first frame initialises
+  EXPECT_EQ(total.lost, 2);
+  EXPECT_EQ(total.weak, 13);
+  EXPECT_GT(total.min_tracked, 0);
+  EXPECT_EQ(window.frames, 15);  // the window handed out has them all
+  EXPECT_EQ(window.lost, 2);
+  EXPECT_EQ(next.frames, 15);    // still the last window's
+  // The default threshold: the rendered room tracks far above it.
+  distill::TrackingHealth sound;
+  runBlankGap(100, 100, 16, TrackerParams(), [&](Tracker& t) { sound = t.totalHealth(); });
+  EXPECT_EQ(sound.frames, 15);
+  EXPECT_EQ(sound.lost, 0);
+  EXPECT_EQ(sound.weak, 0) << "fewest inliers " << sound.min_tracked;
 }
 
 TEST(Tracker, RelocalisesByDescriptorAfterALongGap) {

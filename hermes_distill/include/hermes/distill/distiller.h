@@ -57,6 +57,7 @@ struct DistillReport {
   double bytes_predicted = 0;  ///< byte model of the sent submap
   std::size_t bytes_actual = 0;  ///< encoder's size (0 without a size function)
   bool over_budget = false;
+  bool trouble = false;        ///< the window was in trouble (inTrouble): more keyframes and budget
   int rounds = 0;
   double objective = 0, greedy_objective = 0, support_slack = 0, grid_slack = 0;
   double alpha = 0, beta = 0;
@@ -72,6 +73,11 @@ struct DistillResult {
   /// keypoints it did not send (heldBackKeypoints), for extendWithHeldBack.
   std::optional<Submap> held_back;
 };
+
+/// A window where the agent's tracking was in trouble: lost (within the window,
+/// or a keyframe of the window follows a loss) or weak on at least
+/// params.trouble_weak_frames frames. Always false with trouble_aware off.
+bool inTrouble(const Submap& window, const TrackingHealth& health, const DistillParams& params);
 
 class Distiller {
  public:

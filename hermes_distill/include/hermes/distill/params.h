@@ -30,6 +30,7 @@
 //   distill.trim_min_shared   landmarks two consecutive kept keyframes must share
 //   distill.trim_time_limit_s CBC time limit of the trimming MILP [s]
 //   distill.max_keyframes     N_KF when the coordinator is off
+//   distill.trouble_*         windows where tracking was lost or weak (see below)
 //   distill.k_max, distill.k_min   range of K the coordinator may choose
 //   distill.k_pref            K the coordinator keeps before it drops keyframes
 //   distill.loop_keypoints    most keypoints per kept keyframe sent without a
@@ -99,6 +100,18 @@ struct DistillParams {
   double trim_lambda = 0.05;
   int trim_min_shared = 10;
   double trim_time_limit_s = 0.05;
+
+  // Windows in trouble (issue 16 item 4): the agent's tracking was lost, or
+  // weak on at least trouble_weak_frames frames, within the window (or a kept
+  // keyframe follows a loss). Such a window keeps up to trouble_max_keyframes
+  // keyframes and plans with trouble_budget_gain x the Eq. 17 budget: the
+  // server needs the keyframes and landmarks there to repair the odometry with
+  // loops. The extra bytes enter the backlog, so the sound windows after it get
+  // less (Eq. 17 subtracts the backlog).
+  bool trouble_aware = true;
+  int trouble_weak_frames = 3;
+  int trouble_max_keyframes = 24;
+  double trouble_budget_gain = 1.5;
 
   // Initial byte model.
   double bytes_c0 = 256;

@@ -23,13 +23,24 @@
 namespace hermes {
 namespace distill {
 
-/// The latest visual-odometry motion of the camera.
+/// How tracking went over the frames of a window (the agent's view of its own
+/// weak spots): frames fed, frames lost, frames tracked with few inliers.
+struct TrackingHealth {
+  int frames = 0;
+  int lost = 0;  ///< tracking failed
+  int weak = 0;  ///< tracked, with fewer inliers than tracker.weak_tracked
+  int min_tracked = 0;  ///< fewest inliers of a tracked frame (0: none tracked)
+};
+
+/// The latest visual-odometry motion of the camera, and the tracking health of
+/// the window it comes with.
 struct MotionHint {
   bool valid = false;
   SE3 T_A_C;          ///< latest camera pose (agent <- camera)
   SE3 T_Cprev_Ccurr;  ///< motion between the last two tracked frames
   double dt_s = 0.05; ///< time between those frames [s]
   std::uint32_t camera_id = 0;
+  TrackingHealth health;  ///< over the window handed out with this hint (valid or not)
 };
 
 /// Constant-velocity extrapolation: `count` poses at (i/count)·horizon, i = 1..count.

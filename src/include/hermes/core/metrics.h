@@ -86,6 +86,8 @@ struct AgentMetrics {
   std::optional<int64_t> held_submaps;          ///< server: submaps waiting to be merged now
   std::optional<int64_t> held_bytes;            ///< server: their frame bytes now [B]
   std::optional<int64_t> held_bytes_peak;       ///< server: the most ever held at once [B]
+  std::optional<int64_t> weak_frames;           ///< agent: frames tracked with few inliers
+  std::optional<int64_t> trouble_windows;       ///< agent: windows distilled as in trouble
 };
 
 struct RunMetrics {

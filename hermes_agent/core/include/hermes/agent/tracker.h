@@ -73,6 +73,9 @@ struct TrackerParams {
   SubmapWindowParams window;
   int init_min_points = 60;       ///< depth keypoints needed to initialise
   int min_tracked = 25;           ///< inliers for tracking to count as OK
+  /// A tracked frame with fewer inliers is weak (TrackingHealth; the distiller
+  /// spends more of the budget on windows in trouble). 0 = never weak.
+  int weak_tracked = 80;
   int local_map_keyframes = 6;    ///< landmarks of the last N keyframes form the local map
   double relocalise_radius_px = 40;  ///< search radius when lost
   /// When lost and the projection search fails: match the landmarks of the last N
@@ -155,8 +158,11 @@ class Tracker {
   void markLost() { lost_since_keyframe_ = true; }
   /// Called on every window takeWindowIfDue hands out (test hooks).
   void setWindowHook(std::function<void(Submap*)> hook) { window_hook_ = std::move(hook); }
-  /// Latest VO motion for the distiller (valid after two consecutive tracked frames).
+  /// Latest VO motion for the distiller (valid after two consecutive tracked
+  /// frames), with the tracking health of the last window takeWindowIfDue handed out.
   distill::MotionHint motionHint() const;
+  /// Tracking health since the start (all frames fed).
+  const distill::TrackingHealth& totalHealth() const { return total_health_; }
 
  private:
   Status computeFeatures(const CameraFrame& frame, FeatureSet* features) const;
@@ -195,6 +201,10 @@ class Tracker {
   double window_last_t_ = 0;
   bool window_started_ = false;
   std::function<void(Submap*)> window_hook_;
+  void noteHealth(const TrackResult& r);
+  distill::TrackingHealth health_;         ///< frames since the last window hand-over
+  distill::TrackingHealth window_health_;  ///< of the last window handed out
+  distill::TrackingHealth total_health_;
   // Parallel mapping (all touched by the caller's thread only, except the
   // finished-job mailbox, which the mapper thread fills under done_mu_).
   MappingStageStats mapping_stats_;
