@@ -233,6 +233,7 @@ TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
   ASSERT_TRUE(w.ok()) << w.error();
   ASSERT_GE(w->submap.keyframes.size(), 20u);
   DistillParams p;
+  p.trouble_budget_gain = 1.5;  // borrowing (the default, 1, keeps the budget)
   CoordinatorInput in;
   in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (p.eta * p.window_s);
   in.backlog_bytes = 1000;
@@ -259,6 +260,15 @@ TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
     EXPECT_GT(t.bytes_actual, base.bytes_actual);
     EXPECT_LE(static_cast<double>(t.bytes_actual), t.budget_bytes);
   }
+  // Without borrowing: more keyframes within the same budget.
+  DistillParams same_budget = p;
+  same_budget.trouble_budget_gain = 1.0;
+  const DistillReport kept = run(same_budget, weak);
+  ASSERT_FALSE(kept.deferred) << kept.defer_reason;
+  EXPECT_TRUE(kept.trouble);
+  EXPECT_GT(kept.n_kf, p.max_keyframes);
+  EXPECT_DOUBLE_EQ(kept.budget_bytes, base.budget_bytes);
+  EXPECT_LE(static_cast<double>(kept.bytes_actual), kept.budget_bytes);
   // A keyframe of the window that follows a loss puts it in trouble too.
   Submap after_loss = w->submap;
   after_loss.keyframes[5].lost_before = true;

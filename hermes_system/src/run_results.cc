@@ -408,6 +408,12 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
                   static_cast<long long>(a.submaps_deferred.value_or(0)),
                   double(a.bytes.value_or(0)) / 1000.0);
     o << buf;
+    if (a.trouble_windows.value_or(0) > 0) {  // windows distilled with more keyframes / budget
+      std::snprintf(buf, sizeof buf, "  %-14s in trouble: %lld window(s), %lld weak frame(s)\n", "",
+                    static_cast<long long>(*a.trouble_windows),
+                    static_cast<long long>(a.weak_frames.value_or(0)));
+      o << buf;
+    }
   }
   if (res.loop_accuracy) {
     const LoopAccuracy& l = *res.loop_accuracy;

@@ -32,7 +32,7 @@ struct WindowCounters {
   std::int64_t windows = 0, sent = 0, deferred = 0, failed = 0;
   std::int64_t refused = 0;  ///< encoded but refused by the uplink's buffer (full)
   std::int64_t bytes = 0;  ///< encoded bytes of the sent submaps
-  std::int64_t trouble = 0;  ///< windows distilled as in trouble (DistillReport::trouble)
+  std::int64_t trouble = 0;  ///< windows sent as in trouble (DistillReport::trouble)
   std::int64_t carried = 0;  ///< windows merged into a later one after deferral / refusal
   std::int64_t carry_dropped_keyframes = 0;  ///< dropped by the kMaxCarryKeyframes bound
   std::optional<Submap> carry;  ///< deferred / refused window waiting for the next
@@ -104,7 +104,6 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
     ++counters->failed;
     return;
   }
-  if (r.report.trouble) ++counters->trouble;
   if (r.held_back) {
     counters->held = std::move(r.held_back);
   } else if (counters->held && in.link_keeps_up && !r.report.deferred) {
@@ -140,6 +139,7 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
     }
   }
   ++counters->sent;
+  if (r.report.trouble) ++counters->trouble;
   counters->bytes += size;
 }
 
