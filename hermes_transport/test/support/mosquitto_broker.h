@@ -1,0 +1,50 @@
+// A real Debian `mosquitto` broker for tests: its own folder with a generated
+// minimal config (one listener on 127.0.0.1 and a free port), started as a child
+// process, killed with SIGKILL (a crash: nothing flushed) and started again on
+// the same port.
+#pragma once
+
+#include <sys/types.h>
+
+#include <string>
+
+namespace hermes::transport::test {
+
+struct BrokerOptions {
+  bool persistence = false;   ///< true: sessions survive a restart (persistence file in the folder)
+  std::string password_file;  ///< set: allow_anonymous false, users from this mosquitto_passwd file
+};
+
+class MosquittoBroker {
+ public:
+  /// The broker binary: $HERMES_MOSQUITTO, else `mosquitto` on PATH, else
+  /// /usr/sbin/mosquitto; empty when there is none (tests then skip).
+  static std::string binary();
+  /// A TCP port on 127.0.0.1 nobody listens on right now.
+  static int freePort();
+
+  MosquittoBroker(std::string dir, BrokerOptions options = {});
+  ~MosquittoBroker();
+  MosquittoBroker(const MosquittoBroker&) = delete;
+  MosquittoBroker& operator=(const MosquittoBroker&) = delete;
+
+  /// Starts the broker and waits until it accepts connections; false (and
+  /// error()) when it does not within 5 s.
+  bool start();
+  /// SIGKILL and reap.
+  void kill();
+  bool running() const { return pid_ > 0; }
+  int port() const { return port_; }
+  const std::string& error() const { return error_; }
+  /// The broker's log (for failure messages).
+  std::string log() const;
+
+ private:
+  std::string dir_;
+  BrokerOptions options_;
+  int port_ = 0;
+  pid_t pid_ = -1;
+  std::string error_;
+};
+
+}  // namespace hermes::transport::test

@@ -1,0 +1,178 @@
+// MqttClient against a real mosquitto broker on a loopback port: the error when
+// the broker cannot be reached, delivery, the bounded inbox, losing the broker
+// and getting it back (with and without the broker keeping our session), and
+// username/password. Skipped only when the mosquitto binary is missing.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "hermes/transport/mqtt_client.h"
+#include "mosquitto_broker.h"
+
+using namespace hermes;
+using namespace hermes::transport;
+using hermes::transport::test::BrokerOptions;
+using hermes::transport::test::MosquittoBroker;
+
+#define REQUIRE_MOSQUITTO()                                                                   \
+  if (MosquittoBroker::binary().empty())                                                      \
+  GTEST_SKIP() << "no mosquitto binary (apt-get install mosquitto, or set HERMES_MOSQUITTO)"
+
+namespace {
+
+MqttParams paramsFor(int port) {
+  MqttParams p;
+  p.port = port;
+  p.keepalive_s = 5;
+  p.reconnect_min_s = 0.05;
+  p.reconnect_max_s = 0.4;
+  p.connect_timeout_s = 2;
+  return p;
+}
+
+std::unique_ptr<MqttClient> client(const MqttParams& p, const std::string& id,
+                                   std::vector<MqttSubscription> subs = {}) {
+  auto c = MqttClient::create(p, id, std::move(subs));
+  EXPECT_TRUE(c.ok()) << c.error();
+  return c.ok() ? std::move(*c) : nullptr;
+}
+
+/// Pumps both clients until `done` or `seconds` pass.
+template <class F>
+bool pumpUntil(std::initializer_list<MqttClient*> clients, double seconds, F done) {
+  const double deadline = mqttClock() + seconds;
+  while (mqttClock() < deadline) {
+    for (MqttClient* c : clients) c->pump(5);
+    if (done()) return true;
+  }
+  return false;
+}
+
+std::size_t countKind(const std::vector<MqttEvent>& events, MqttEvent::Kind kind) {
+  std::size_t n = 0;
+  for (const MqttEvent& e : events) n += e.kind == kind;
+  return n;
+}
+
+}  // namespace
+
+TEST(MqttClient, UnreachableBrokerGivesAClearError) {
+  const int port = MosquittoBroker::freePort();
+  auto c = client(paramsFor(port), "hermes-test-unreachable");
+  ASSERT_TRUE(c);
+  Status s = c->waitConnected(0.5);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("MQTT broker 127.0.0.1:" + std::to_string(port) + " cannot be reached"),
+            std::string::npos)
+      << s.error();
+  EXPECT_NE(s.error().find("refused"), std::string::npos) << s.error();
+  EXPECT_GE(c->stats().failed_attempts, 2u);  // retried with backoff
+  EXPECT_FALSE(c->publish("t", {1, 2}, 2).ok());
+  EXPECT_EQ(c->stats().refused, 1u);
+}
+
+TEST(MqttClient, DeliversQos2AndBoundsTheInbox) {
+  REQUIRE_MOSQUITTO();
+  MosquittoBroker broker(::testing::TempDir() + "/mqtt_client_deliver");
+  ASSERT_TRUE(broker.start()) << broker.error();
+  MqttParams p = paramsFor(broker.port());
+  p.inbox_capacity = 5;
+  auto rx = client(p, "hermes-test-rx", {{"t/#", 2}});
+  auto tx = client(p, "hermes-test-tx");
+  ASSERT_TRUE(rx && tx);
+  ASSERT_TRUE(rx->waitConnected(3)) << rx->lastError();
+  ASSERT_TRUE(tx->waitConnected(3)) << tx->lastError();
+  auto events = rx->drain();
+  ASSERT_EQ(countKind(events, MqttEvent::Kind::kConnected), 1u);
+  pumpUntil({rx.get()}, 0.3, [] { return false; });  // the SUBACK
+  for (int i = 0; i < 20; ++i)
+    ASSERT_TRUE(tx->publish("t/" + std::to_string(i), {static_cast<std::uint8_t>(i), 0xff}, 2));
+  ASSERT_TRUE(pumpUntil({rx.get(), tx.get()}, 5, [&] { return rx->stats().received == 20; }))
+      << rx->stats().received;
+  EXPECT_EQ(tx->stats().completed, 20u);  // PUBCOMP for every QoS 2 publish
+  events = rx->drain();
+  ASSERT_EQ(events.size(), 5u);  // the capacity; the rest dropped and counted
+  EXPECT_EQ(rx->stats().dropped, 15u);
+  EXPECT_EQ(events[0].topic, "t/0");
+  EXPECT_EQ(events[4].payload, (std::vector<std::uint8_t>{4, 0xff}));
+}
+
+// The broker dies (SIGKILL) and comes back: the client notices, retries with
+// backoff and reconnects by itself. Without persistence the broker forgot our
+// session; with it, a QoS 2 message published while we were away still arrives.
+TEST(MqttClient, ReconnectsAfterBrokerRestartWithAndWithoutPersistence) {
+  REQUIRE_MOSQUITTO();
+  for (bool persistence : {false, true}) {
+    SCOPED_TRACE(persistence ? "persistence true" : "persistence false");
+    BrokerOptions o;
+    o.persistence = persistence;
+    MosquittoBroker broker(::testing::TempDir() + "/mqtt_client_restart", o);
+    ASSERT_TRUE(broker.start()) << broker.error();
+    const MqttParams p = paramsFor(broker.port());
+    auto rx = client(p, "hermes-test-rx-restart", {{"q", 2}});
+    ASSERT_TRUE(rx);
+    rx->start();  // threaded mode
+    ASSERT_TRUE(rx->waitConnected(3)) << rx->lastError();
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // SUBACK; autosave
+    rx->stop();
+    rx.reset();  // away (clean DISCONNECT: the session stays)
+    {
+      auto tx = client(p, "hermes-test-tx-restart");
+      ASSERT_TRUE(tx->waitConnected(3));
+      ASSERT_TRUE(tx->publish("q", {42}, 2));
+      ASSERT_TRUE(pumpUntil({tx.get()}, 3, [&] { return tx->stats().completed == 1; }));
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // autosave_interval 1 s
+    broker.kill();
+    ASSERT_TRUE(broker.start()) << broker.error();
+    rx = client(p, "hermes-test-rx-restart", {{"q", 2}});
+    rx->start();
+    ASSERT_TRUE(rx->waitConnected(3)) << rx->lastError();
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    auto events = rx->drain();
+    ASSERT_GE(events.size(), 1u);
+    EXPECT_EQ(events[0].kind, MqttEvent::Kind::kConnected);
+    EXPECT_EQ(events[0].session_present, persistence);
+    EXPECT_EQ(countKind(events, MqttEvent::Kind::kMessage), persistence ? 1u : 0u);
+
+    // Lost while connected: a kConnectionLost event, reconnection by itself.
+    broker.kill();
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_FALSE(rx->connected());
+    ASSERT_TRUE(broker.start()) << broker.error();
+    ASSERT_TRUE(rx->waitConnected(5)) << rx->lastError();
+    events = rx->drain();
+    EXPECT_EQ(countKind(events, MqttEvent::Kind::kConnectionLost), 1u);
+    EXPECT_EQ(countKind(events, MqttEvent::Kind::kConnected), 1u);
+    EXPECT_GE(rx->stats().losses, 1u);
+  }
+}
+
+TEST(MqttClient, UsernameAndPassword) {
+  REQUIRE_MOSQUITTO();
+  const std::string passwd_tool = "/usr/bin/mosquitto_passwd";
+  if (!std::filesystem::exists(passwd_tool)) GTEST_SKIP() << "no " << passwd_tool;
+  const std::string dir = ::testing::TempDir() + "/mqtt_client_auth_files";
+  std::filesystem::create_directories(dir);
+  const std::string users = dir + "/users";
+  std::filesystem::remove(users);
+  ASSERT_EQ(std::system((passwd_tool + " -b -c " + users + " robots s3cret").c_str()), 0);
+  BrokerOptions o;
+  o.password_file = users;
+  MosquittoBroker broker(::testing::TempDir() + "/mqtt_client_auth", o);
+  ASSERT_TRUE(broker.start()) << broker.error();
+  MqttParams p = paramsFor(broker.port());
+  p.username = "robots";
+  p.password_file = dir + "/pw";
+  std::ofstream(p.password_file) << "wrong\n";
+  auto bad = client(p, "hermes-test-auth-bad");
+  Status s = bad->waitConnected(1);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("refused"), std::string::npos) << s.error();
+  std::ofstream(p.password_file) << "s3cret\n";
+  auto good = client(p, "hermes-test-auth-good");
+  EXPECT_TRUE(good->waitConnected(3)) << good->lastError();
+}
