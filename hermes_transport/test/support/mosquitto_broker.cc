@@ -62,8 +62,8 @@ int MosquittoBroker::freePort() {
   return port;
 }
 
-MosquittoBroker::MosquittoBroker(std::string dir, BrokerOptions options)
-    : dir_(std::move(dir)), options_(std::move(options)), port_(freePort()) {
+MosquittoBroker::MosquittoBroker(std::string dir, BrokerOptions options, int port)
+    : dir_(std::move(dir)), options_(std::move(options)), port_(port > 0 ? port : freePort()) {
   fs::remove_all(dir_);
   fs::create_directories(dir_);
   std::ofstream conf(dir_ + "/mosquitto.conf");

@@ -23,7 +23,8 @@ class MosquittoBroker {
   /// A TCP port on 127.0.0.1 nobody listens on right now.
   static int freePort();
 
-  MosquittoBroker(std::string dir, BrokerOptions options = {});
+  /// `port` 0: a free one (freePort()).
+  MosquittoBroker(std::string dir, BrokerOptions options = {}, int port = 0);
   ~MosquittoBroker();
   MosquittoBroker(const MosquittoBroker&) = delete;
   MosquittoBroker& operator=(const MosquittoBroker&) = delete;
