@@ -79,9 +79,7 @@ bool startBroker(int port) {
   g_broker = std::make_unique<hermes::transport::test::MosquittoBroker>(
       "/tmp/hermes_rostest_mqtt_broker_" + std::to_string(port), hermes::transport::test::BrokerOptions{}, port);
   EXPECT_TRUE(g_broker->start()) << g_broker->error();
-  g_mqtt.port = port;
-  g_mqtt.reconnect_min_s = 0.1;
-  g_mqtt.reconnect_max_s = 1.0;
+  g_mqtt = hermes::transport::test::testMqttParams(port);
   return true;
 }
 

@@ -16,22 +16,9 @@ using namespace hermes;
 using namespace hermes::transport;
 using hermes::transport::test::BrokerOptions;
 using hermes::transport::test::MosquittoBroker;
-
-#define REQUIRE_MOSQUITTO()                                                                   \
-  if (MosquittoBroker::binary().empty())                                                      \
-  GTEST_SKIP() << "no mosquitto binary (apt-get install mosquitto, or set HERMES_MOSQUITTO)"
+using hermes::transport::test::testMqttParams;
 
 namespace {
-
-MqttParams paramsFor(int port) {
-  MqttParams p;
-  p.port = port;
-  p.keepalive_s = 5;
-  p.reconnect_min_s = 0.05;
-  p.reconnect_max_s = 0.4;
-  p.connect_timeout_s = 2;
-  return p;
-}
 
 std::unique_ptr<MqttClient> client(const MqttParams& p, const std::string& id,
                                    std::vector<MqttSubscription> subs = {}) {
@@ -61,7 +48,7 @@ std::size_t countKind(const std::vector<MqttEvent>& events, MqttEvent::Kind kind
 
 TEST(MqttClient, UnreachableBrokerGivesAClearError) {
   const int port = MosquittoBroker::freePort();
-  auto c = client(paramsFor(port), "hermes-test-unreachable");
+  auto c = client(testMqttParams(port), "hermes-test-unreachable");
   ASSERT_TRUE(c);
   Status s = c->waitConnected(0.5);
   ASSERT_FALSE(s.ok());
@@ -75,10 +62,10 @@ TEST(MqttClient, UnreachableBrokerGivesAClearError) {
 }
 
 TEST(MqttClient, DeliversQos2AndBoundsTheInbox) {
-  REQUIRE_MOSQUITTO();
+  HERMES_REQUIRE_MOSQUITTO();
   MosquittoBroker broker(::testing::TempDir() + "/mqtt_client_deliver");
   ASSERT_TRUE(broker.start()) << broker.error();
-  MqttParams p = paramsFor(broker.port());
+  MqttParams p = testMqttParams(broker.port());
   p.inbox_capacity = 5;
   auto rx = client(p, "hermes-test-rx", {{"t/#", 2}});
   auto tx = client(p, "hermes-test-tx");
@@ -104,14 +91,14 @@ TEST(MqttClient, DeliversQos2AndBoundsTheInbox) {
 // backoff and reconnects by itself. Without persistence the broker forgot our
 // session; with it, a QoS 2 message published while we were away still arrives.
 TEST(MqttClient, ReconnectsAfterBrokerRestartWithAndWithoutPersistence) {
-  REQUIRE_MOSQUITTO();
+  HERMES_REQUIRE_MOSQUITTO();
   for (bool persistence : {false, true}) {
     SCOPED_TRACE(persistence ? "persistence true" : "persistence false");
     BrokerOptions o;
     o.persistence = persistence;
     MosquittoBroker broker(::testing::TempDir() + "/mqtt_client_restart", o);
     ASSERT_TRUE(broker.start()) << broker.error();
-    const MqttParams p = paramsFor(broker.port());
+    const MqttParams p = testMqttParams(broker.port());
     auto rx = client(p, "hermes-test-rx-restart", {{"q", 2}});
     ASSERT_TRUE(rx);
     rx->start();  // threaded mode
@@ -152,7 +139,7 @@ TEST(MqttClient, ReconnectsAfterBrokerRestartWithAndWithoutPersistence) {
 }
 
 TEST(MqttClient, UsernameAndPassword) {
-  REQUIRE_MOSQUITTO();
+  HERMES_REQUIRE_MOSQUITTO();
   const std::string passwd_tool = "/usr/bin/mosquitto_passwd";
   if (!std::filesystem::exists(passwd_tool)) GTEST_SKIP() << "no " << passwd_tool;
   const std::string dir = ::testing::TempDir() + "/mqtt_client_auth_files";
@@ -164,7 +151,7 @@ TEST(MqttClient, UsernameAndPassword) {
   o.password_file = users;
   MosquittoBroker broker(::testing::TempDir() + "/mqtt_client_auth", o);
   ASSERT_TRUE(broker.start()) << broker.error();
-  MqttParams p = paramsFor(broker.port());
+  MqttParams p = testMqttParams(broker.port());
   p.username = "robots";
   p.password_file = dir + "/pw";
   std::ofstream(p.password_file) << "wrong\n";

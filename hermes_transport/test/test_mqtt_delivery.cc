@@ -23,24 +23,11 @@
 using namespace hermes;
 using namespace hermes::transport;
 using hermes::transport::test::MosquittoBroker;
-
-#define REQUIRE_MOSQUITTO()                                                                   \
-  if (MosquittoBroker::binary().empty())                                                      \
-  GTEST_SKIP() << "no mosquitto binary (apt-get install mosquitto, or set HERMES_MOSQUITTO)"
+using hermes::transport::test::testMqttParams;
 
 namespace {
 
 using Key = std::tuple<std::string, std::uint32_t, std::uint64_t>;  // robot name, session, seq
-
-MqttParams paramsFor(int port) {
-  MqttParams p;
-  p.port = port;
-  p.keepalive_s = 5;
-  p.reconnect_min_s = 0.05;
-  p.reconnect_max_s = 0.5;
-  p.connect_timeout_s = 2;
-  return p;
-}
 
 std::vector<std::uint8_t> frameFor(const std::string& robot, std::uint32_t session, std::uint64_t seq) {
   SyntheticSubmapOptions o;
@@ -185,10 +172,10 @@ void expectExactlyOnce(const ServerSide& server, const std::vector<AgentSide*>& 
 }  // namespace
 
 TEST(MqttDelivery, ThreeAgentsExactlyOnce) {
-  REQUIRE_MOSQUITTO();
+  HERMES_REQUIRE_MOSQUITTO();
   MosquittoBroker broker(::testing::TempDir() + "/mqtt_delivery_normal");
   ASSERT_TRUE(broker.start()) << broker.error();
-  const MqttParams p = paramsFor(broker.port());
+  const MqttParams p = testMqttParams(broker.port());
   ServerSide server(p);
   ASSERT_TRUE(server.link->client().waitConnected(3)) << server.link->client().lastError();
   std::vector<std::unique_ptr<AgentSide>> agents;
@@ -234,10 +221,10 @@ TEST(MqttDelivery, ThreeAgentsExactlyOnce) {
 // unacked submaps of the old one still in its spool). Every submap is applied
 // exactly once.
 TEST(MqttDelivery, BrokerKilledAndRestartedAndAgentRestartedExactlyOnce) {
-  REQUIRE_MOSQUITTO();
+  HERMES_REQUIRE_MOSQUITTO();
   MosquittoBroker broker(::testing::TempDir() + "/mqtt_delivery_restart");
   ASSERT_TRUE(broker.start()) << broker.error();
-  const MqttParams p = paramsFor(broker.port());
+  const MqttParams p = testMqttParams(broker.port());
   ServerSide server(p);
   ASSERT_TRUE(server.link->client().waitConnected(3));
   std::vector<std::unique_ptr<AgentSide>> agents;
@@ -312,10 +299,10 @@ TEST(MqttDelivery, BrokerKilledAndRestartedAndAgentRestartedExactlyOnce) {
 // the same client id: its acknowledgements were kept in its persistent session
 // and arrive without a single resend.
 TEST(MqttDelivery, ReconnectingAgentGetsItsAcksFromThePersistentSession) {
-  REQUIRE_MOSQUITTO();
+  HERMES_REQUIRE_MOSQUITTO();
   MosquittoBroker broker(::testing::TempDir() + "/mqtt_delivery_session");
   ASSERT_TRUE(broker.start()) << broker.error();
-  const MqttParams p = paramsFor(broker.port());
+  const MqttParams p = testMqttParams(broker.port());
   ServerSide server(p);
   ASSERT_TRUE(server.link->client().waitConnected(3));
   AgentSide a("a1", p);
@@ -362,10 +349,10 @@ TEST(MqttDelivery, ReconnectingAgentGetsItsAcksFromThePersistentSession) {
 // topic. Each is answered with a reason (frames) or reported (the rest); the two
 // honest robots deliver exactly once meanwhile.
 TEST(MqttDelivery, MalformedPayloadsAreRejectedWithAReasonAndDisturbNoOne) {
-  REQUIRE_MOSQUITTO();
+  HERMES_REQUIRE_MOSQUITTO();
   MosquittoBroker broker(::testing::TempDir() + "/mqtt_delivery_malformed");
   ASSERT_TRUE(broker.start()) << broker.error();
-  const MqttParams p = paramsFor(broker.port());
+  const MqttParams p = testMqttParams(broker.port());
   ServerSide server(p);
   ASSERT_TRUE(server.link->client().waitConnected(3));
   AgentSide a1("a1", p), a2("a2", p);

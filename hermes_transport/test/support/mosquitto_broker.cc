@@ -38,6 +38,16 @@ bool accepts(int port) {
 
 }  // namespace
 
+MqttParams testMqttParams(int port) {
+  MqttParams p;
+  p.port = port;
+  p.keepalive_s = 5;
+  p.reconnect_min_s = 0.05;
+  p.reconnect_max_s = 0.5;
+  p.connect_timeout_s = 2;
+  return p;
+}
+
 std::string MosquittoBroker::binary() {
   if (const char* env = std::getenv("HERMES_MOSQUITTO"); env && executable(env)) return env;
   if (const char* path = std::getenv("PATH")) {

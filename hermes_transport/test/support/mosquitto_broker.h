@@ -8,7 +8,17 @@
 
 #include <string>
 
+#include "hermes/transport/transport_params.h"
+
+/// Skips the test (with the reason) when there is no mosquitto binary.
+#define HERMES_REQUIRE_MOSQUITTO()                                                   \
+  if (::hermes::transport::test::MosquittoBroker::binary().empty())                  \
+  GTEST_SKIP() << "no mosquitto binary (apt-get install mosquitto, or set HERMES_MOSQUITTO)"
+
 namespace hermes::transport::test {
+
+/// Client parameters for a test broker on `port`: short keepalive and backoff.
+MqttParams testMqttParams(int port);
 
 struct BrokerOptions {
   bool persistence = false;   ///< true: sessions survive a restart (persistence file in the folder)
