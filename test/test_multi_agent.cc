@@ -98,6 +98,21 @@ std::unique_ptr<hermes::transport::MqttClient> observer(const std::string& id) {
   return std::move(*c);
 }
 
+/// A small valid frame claiming to be `robot`'s seq `seq`, tagged with `key` if given.
+std::vector<std::uint8_t> forgedFrame(const std::string& robot, std::uint64_t seq, const hermes::FrameKey* key) {
+  hermes::SyntheticSubmapOptions opt;
+  opt.keyframes = 2;
+  opt.keypoints_per_keyframe = 30;
+  opt.landmarks = 20;
+  hermes::Submap s = hermes::makeSyntheticSubmap(opt);
+  s.header.agent = hermes::agentUuid(robot);
+  s.header.seq = seq;
+  auto f = hermes::encodeSubmap(s);
+  EXPECT_TRUE(f.ok());
+  if (key && f.ok()) f = hermes::signFrame(*f, *key);
+  return f.ok() ? *f : std::vector<std::uint8_t>();
+}
+
 /// Records what the observer saw, as the ROS subscriptions do.
 void observeMqtt(hermes::transport::MqttClient& client, Observed& o) {
   using namespace hermes::transport;
@@ -390,18 +405,8 @@ TEST(MultiAgent, UnauthenticatedFramesAreRefusedWithReasons) {
     ros::WallDuration(0.5).sleep();  // SUBACK
     auto send = [&](const std::string& topic_robot, const std::string& robot, std::uint64_t seq,
                     const hermes::FrameKey* key) {
-      hermes::SyntheticSubmapOptions opt;
-      opt.keyframes = 2;
-      opt.keypoints_per_keyframe = 30;
-      opt.landmarks = 20;
-      hermes::Submap s = hermes::makeSyntheticSubmap(opt);
-      s.header.agent = hermes::agentUuid(robot);
-      s.header.seq = seq;
-      auto f = hermes::encodeSubmap(s);
-      ASSERT_TRUE(f.ok());
-      if (key) f = hermes::signFrame(*f, *key);
-      ASSERT_TRUE(watcher->publish(
-          hermes::transport::mqttTopic(topic_robot, hermes::transport::MqttChannel::kSubmap), *f, 2));
+      ASSERT_TRUE(watcher->publish(hermes::transport::mqttTopic(topic_robot, hermes::transport::MqttChannel::kSubmap),
+                                   forgedFrame(robot, seq, key), 2));
     };
     send("agent0", "agent0", 900001, nullptr);     // no tag
     send("agent0", "agent0", 900002, &stranger);   // not agent0's key
@@ -453,22 +458,14 @@ TEST(MultiAgent, UnauthenticatedFramesAreRefusedWithReasons) {
   hermes::FrameKey stranger_key;
   stranger_key.bytes.fill(0x42);
   auto frame = [&](const std::string& robot, std::uint64_t seq, const hermes::FrameKey* key) {
-    hermes::SyntheticSubmapOptions opt;
-    opt.keyframes = 2;
-    opt.keypoints_per_keyframe = 30;
-    opt.landmarks = 20;
-    hermes::Submap s = hermes::makeSyntheticSubmap(opt);
-    s.header.agent = hermes::agentUuid(robot);
-    s.header.seq = seq;
-    auto f = hermes::encodeSubmap(s);
-    EXPECT_TRUE(f.ok());
-    if (key) f = hermes::signFrame(*f, *key);
     hermes_msgs::EncodedSubmap m;
     m.header.stamp = ros::Time::now();
-    m.agent_uuid = hermes::toString(s.header.agent);
-    m.session = s.header.session;
+    m.data = forgedFrame(robot, seq, key);
+    const auto h = hermes::peekFrame(m.data.data(), m.data.size());
+    EXPECT_TRUE(h.ok());
+    m.agent_uuid = hermes::toString(hermes::agentUuid(robot));
+    m.session = h.ok() ? h->routing.session : 0;
     m.seq = seq;
-    m.data = *f;
     return m;
   };
   pub.publish(frame("agent0", 900001, nullptr));        // no tag

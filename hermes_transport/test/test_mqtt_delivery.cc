@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <set>
@@ -169,6 +170,58 @@ void expectExactlyOnce(const ServerSide& server, const std::vector<AgentSide*>& 
   for (const AgentSide* a : agents) EXPECT_TRUE(a->drained()) << a->name << " still has unacked submaps";
 }
 
+/// Robots a1, a2, a3 submitting in step with the server's steps.
+struct Fleet {
+  std::vector<std::unique_ptr<AgentSide>> agents;
+
+  explicit Fleet(const MqttParams& p) {
+    for (const char* n : {"a1", "a2", "a3"}) {
+      agents.push_back(std::make_unique<AgentSide>(n, p));
+      agents.back()->open(true);
+    }
+  }
+  /// Each robot submits `submaps`, one every `period` s, until every spool has
+  /// drained or `limit_s` passed; `hook(seconds since start)` runs first in every
+  /// step (kills, restarts) and returns false while the run may not end yet.
+  /// Returns the seconds taken.
+  double run(ServerSide& server, int submaps, double period, double limit_s,
+             const std::function<bool(double)>& hook = [](double) { return true; }) {
+    const double start = now();
+    int submitted = 0;
+    while (now() - start < limit_s) {
+      const double t = now();
+      bool all = hook(t - start);
+      if (submitted < submaps && t - start >= period * submitted) {
+        for (auto& a : agents) a->submitNext(t);
+        ++submitted;
+      }
+      server.step(t);
+      all = all && submitted == submaps;
+      for (auto& a : agents) {
+        a->step(t);
+        all = all && a->drained();
+      }
+      if (all) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return now() - start;
+  }
+  /// Ends every robot's process; the robots for expectExactlyOnce().
+  std::vector<AgentSide*> close() {
+    std::vector<AgentSide*> raw;
+    for (auto& a : agents) {
+      a->close();
+      raw.push_back(a.get());
+    }
+    return raw;
+  }
+  std::size_t sum(std::size_t AgentSide::*field) const {
+    std::size_t n = 0;
+    for (const auto& a : agents) n += (*a).*field;
+    return n;
+  }
+};
+
 }  // namespace
 
 TEST(MqttDelivery, ThreeAgentsExactlyOnce) {
@@ -178,41 +231,14 @@ TEST(MqttDelivery, ThreeAgentsExactlyOnce) {
   const MqttParams p = testMqttParams(broker.port());
   ServerSide server(p);
   ASSERT_TRUE(server.link->client().waitConnected(3)) << server.link->client().lastError();
-  std::vector<std::unique_ptr<AgentSide>> agents;
-  for (const char* n : {"a1", "a2", "a3"}) {
-    agents.push_back(std::make_unique<AgentSide>(n, p));
-    agents.back()->open(true);
-  }
-  const double start = now();
-  int submitted = 0;
-  while (now() - start < 20) {
-    const double t = now();
-    if (submitted < 10 && t - start >= 0.05 * submitted) {
-      for (auto& a : agents) a->submitNext(t);
-      ++submitted;
-    }
-    server.step(t);
-    bool all = submitted == 10;
-    for (auto& a : agents) {
-      a->step(t);
-      all = all && a->drained();
-    }
-    if (all) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  const double took = now() - start;
-  std::vector<AgentSide*> raw;
-  for (auto& a : agents) {
-    raw.push_back(a.get());
-    a->close();
-  }
-  expectExactlyOnce(server, raw);
+  Fleet fleet(p);
+  const double took = fleet.run(server, 10, 0.05, 20);
+  expectExactlyOnce(server, fleet.close());
   EXPECT_EQ(server.rx.stats().accepted, 30u);
   EXPECT_TRUE(server.rejected.empty());
   std::printf("3 agents x 10 submaps delivered and acknowledged in %.2f s; sends %zu, resends %zu, "
               "server duplicates %zu\n",
-              took, agents[0]->sends + agents[1]->sends + agents[2]->sends,
-              agents[0]->resends + agents[1]->resends + agents[2]->resends, server.rx.stats().duplicates);
+              took, fleet.sum(&AgentSide::sends), fleet.sum(&AgentSide::resends), server.rx.stats().duplicates);
 }
 
 // The failure test: three robots and the server; the broker is killed
@@ -227,72 +253,42 @@ TEST(MqttDelivery, BrokerKilledAndRestartedAndAgentRestartedExactlyOnce) {
   const MqttParams p = testMqttParams(broker.port());
   ServerSide server(p);
   ASSERT_TRUE(server.link->client().waitConnected(3));
-  std::vector<std::unique_ptr<AgentSide>> agents;
-  for (const char* n : {"a1", "a2", "a3"}) {
-    agents.push_back(std::make_unique<AgentSide>(n, p));
-    agents.back()->open(true);
-  }
+  Fleet fleet(p);
   const int kSubmaps = 24;
-  const double start = now(), period = 0.15;
-  int submitted = 0;
   bool killed = false, restarted = false, agent_restarted = false;
   std::size_t applied_before_kill = 0;
-  while (now() - start < 40) {
-    const double t = now(), rel = t - start;
+  const double took = fleet.run(server, kSubmaps, 0.15, 40, [&](double rel) {
     if (!killed && rel >= 0.8) {
       applied_before_kill = server.applied.size();
       broker.kill();
       killed = true;
     }
-    if (killed && !restarted && rel >= 2.0) {
-      ASSERT_TRUE(broker.start()) << broker.error();
-      restarted = true;
-    }
+    if (killed && !restarted && rel >= 2.0) restarted = broker.start();
     if (!agent_restarted && rel >= 2.6) {  // robot a2's process dies and starts again
-      agents[1]->close();
-      agents[1]->open(true);
+      fleet.agents[1]->close();
+      fleet.agents[1]->open(true);
       agent_restarted = true;
     }
-    if (submitted < kSubmaps && rel >= period * submitted) {
-      for (auto& a : agents) a->submitNext(t);
-      ++submitted;
-    }
-    server.step(t);
-    bool all = submitted == kSubmaps && agent_restarted;
-    for (auto& a : agents) {
-      a->step(t);
-      all = all && a->drained();
-    }
-    if (all) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  const double took = now() - start;
-  std::vector<AgentSide*> raw;
-  std::size_t resend_all = 0, resends = 0, sends = 0;
-  for (auto& a : agents) {
-    raw.push_back(a.get());
-    a->close();
-    resend_all += a->resend_all;
-    resends += a->resends;
-    sends += a->sends;
+    return agent_restarted;
+  });
+  for (const auto& a : fleet.agents)
     EXPECT_TRUE(containsText(a->problems, "lost")) << a->name << " did not notice the broker's death";
-  }
-  ASSERT_TRUE(killed && restarted && agent_restarted);
-  expectExactlyOnce(server, raw);
+  expectExactlyOnce(server, fleet.close());
+  ASSERT_TRUE(killed && restarted && agent_restarted) << broker.error();
   EXPECT_EQ(server.rx.stats().accepted, 3u * kSubmaps);
   EXPECT_GT(applied_before_kill, 0u);
   EXPECT_LT(applied_before_kill, 3u * kSubmaps);  // the kill really was mid-run
-  EXPECT_GE(resend_all, 3u);  // every robot resent its backlog after the broker forgot it
+  EXPECT_GE(fleet.sum(&AgentSide::resend_all), 3u);  // every robot resent its backlog after the broker forgot it
   EXPECT_GE(server.link->client().stats().losses, 1u);
   EXPECT_TRUE(containsText(server.problems, "lost"));
   std::set<std::uint32_t> a2_sessions;
-  for (const Key& k : agents[1]->submitted) a2_sessions.insert(std::get<1>(k));
+  for (const Key& k : fleet.agents[1]->submitted) a2_sessions.insert(std::get<1>(k));
   EXPECT_EQ(a2_sessions.size(), 2u);  // the restarted robot used a new session
   std::printf("broker killed at 0.8 s (%zu/%d applied), back at 2.0 s, robot a2 restarted at 2.6 s: "
               "all %zu submaps applied once after %.2f s; %zu sends, %zu resends, %zu backlog "
               "resends, %zu duplicates dropped by the server\n",
-              applied_before_kill, 3 * kSubmaps, server.applied.size(), took, sends, resends, resend_all,
-              server.rx.stats().duplicates);
+              applied_before_kill, 3 * kSubmaps, server.applied.size(), took, fleet.sum(&AgentSide::sends),
+              fleet.sum(&AgentSide::resends), fleet.sum(&AgentSide::resend_all), server.rx.stats().duplicates);
 }
 
 // A robot publishes, goes away before the server answers, and reconnects with
