@@ -3,6 +3,7 @@
 #include <mosquitto.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
@@ -16,6 +17,13 @@ std::once_flag g_lib_init;
 std::string describe(int rc, int err) {
   if (rc == MOSQ_ERR_ERRNO) return std::strerror(err);
   return mosquitto_strerror(rc);
+}
+
+/// "0.5", "30", "1.25" (seconds in messages).
+std::string seconds(double s) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", s);
+  return buf;
 }
 
 void sleepFor(double seconds) {
@@ -152,8 +160,7 @@ void MqttClient::pump(int timeout_ms) {
     return;
   }
   if (phase_ == Phase::kConnecting && mqttClock() - attempt_started_ > params_.connect_timeout_s) {
-    wentOffline("no CONNACK within mqtt.connect_timeout_s = " + std::to_string(params_.connect_timeout_s) +
-                    " s",
+    wentOffline("no CONNACK within mqtt.connect_timeout_s = " + seconds(params_.connect_timeout_s) + " s",
                 mqttClock());
     mosquitto_disconnect(mosq_);
   }
@@ -169,12 +176,19 @@ Status MqttClient::waitConnected(double timeout_s) {
   const MqttClientStats st = stats();
   return Error{"MQTT broker " + broker_ + " cannot be reached by client " + client_id_ + ": " +
                (lastError().empty() ? std::string("no answer") : lastError()) + " (" +
-               std::to_string(st.failed_attempts) + " failed attempts in " + std::to_string(timeout_s) +
-               " s; still trying, waits up to mqtt.reconnect_max_s = " +
-               std::to_string(params_.reconnect_max_s) + " s)"};
+               std::to_string(st.failed_attempts) + " failed attempts in " + seconds(timeout_s) +
+               " s; still trying, waiting up to mqtt.reconnect_max_s = " + seconds(params_.reconnect_max_s) +
+               " s between attempts)"};
 }
 
 Status MqttClient::publish(const std::string& topic, const std::vector<std::uint8_t>& payload, int qos) {
+  constexpr std::size_t kMaxPayload = 268435455;  // MQTT's remaining-length limit, less the header
+  if (payload.size() > kMaxPayload - topic.size() - 4) {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++stats_.refused;
+    return Error{"mqtt: payload of " + std::to_string(payload.size()) + " bytes on " + topic +
+                 " exceeds the MQTT packet limit (256 MB)"};
+  }
   if (phase_ != Phase::kConnected) {
     std::lock_guard<std::mutex> lock(mu_);
     ++stats_.refused;

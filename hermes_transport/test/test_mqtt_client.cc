@@ -1,7 +1,8 @@
 // MqttClient against a real mosquitto broker on a loopback port: the error when
 // the broker cannot be reached, delivery, the bounded inbox, losing the broker
 // and getting it back (with and without the broker keeping our session), and
-// username/password. Skipped only when the mosquitto binary is missing.
+// username/password, TLS with a client certificate. Skipped only when the
+// mosquitto binary (or, for TLS, the openssl command) is missing.
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -162,4 +163,77 @@ TEST(MqttClient, UsernameAndPassword) {
   std::ofstream(p.password_file) << "s3cret\n";
   auto good = client(p, "hermes-test-auth-good");
   EXPECT_TRUE(good->waitConnected(3)) << good->lastError();
+}
+
+namespace {
+
+/// A CA, and a server and a client certificate it signed (EC P-256, made with the
+/// openssl command); false when a step failed.
+bool makeCertificates(const std::string& dir, const std::string& ca_name) {
+  std::filesystem::create_directories(dir);
+  const std::string key = " -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
+  std::ofstream(dir + "/server.ext") << "subjectAltName=DNS:localhost,IP:127.0.0.1\n";
+  const std::vector<std::string> steps = {
+      "openssl req -x509" + key + " -keyout " + dir + "/ca.key -out " + dir + "/ca.pem -days 2 -subj /CN=" + ca_name,
+      "openssl req" + key + " -keyout " + dir + "/server.key -out " + dir + "/server.csr -subj /CN=localhost",
+      "openssl x509 -req -in " + dir + "/server.csr -CA " + dir + "/ca.pem -CAkey " + dir + "/ca.key -CAcreateserial -out " +
+          dir + "/server.pem -days 2 -extfile " + dir + "/server.ext",
+      "openssl req" + key + " -keyout " + dir + "/client.key -out " + dir + "/client.csr -subj /CN=robot",
+      "openssl x509 -req -in " + dir + "/client.csr -CA " + dir + "/ca.pem -CAkey " + dir + "/ca.key -CAcreateserial -out " +
+          dir + "/client.pem -days 2"};
+  for (const std::string& cmd : steps)
+    if (std::system((cmd + " > " + dir + "/openssl.log 2>&1").c_str()) != 0) return false;
+  return true;
+}
+
+}  // namespace
+
+// The broker speaks TLS only and wants a client certificate: the client with
+// the right CA and its certificate connects and delivers; one that trusts
+// another CA, or speaks plain MQTT, does not get in and says why.
+TEST(MqttClient, TlsWithClientCertificate) {
+  HERMES_REQUIRE_MOSQUITTO();
+  if (std::system("openssl version > /dev/null 2>&1") != 0) GTEST_SKIP() << "no openssl command";
+  const std::string dir = ::testing::TempDir() + "/mqtt_client_tls_files", other = dir + "/other";
+  std::filesystem::remove_all(dir);
+  ASSERT_TRUE(makeCertificates(dir, "hermes-test-ca")) << "openssl failed, see " << dir << "/openssl.log";
+  ASSERT_TRUE(makeCertificates(other, "another-ca"));
+  BrokerOptions o;
+  o.tls_ca_file = dir + "/ca.pem";
+  o.tls_cert_file = dir + "/server.pem";
+  o.tls_key_file = dir + "/server.key";
+  o.require_certificate = true;
+  MosquittoBroker broker(::testing::TempDir() + "/mqtt_client_tls", o);
+  ASSERT_TRUE(broker.start()) << broker.error();
+  MqttParams p = testMqttParams(broker.port());
+  p.host = "localhost";  // the name in the server certificate
+  p.tls.ca_file = dir + "/ca.pem";
+  p.tls.cert_file = dir + "/client.pem";
+  p.tls.key_file = dir + "/client.key";
+  auto rx = client(p, "hermes-test-tls-rx", {{"t", 2}});
+  auto tx = client(p, "hermes-test-tls-tx");
+  ASSERT_TRUE(rx && tx);
+  ASSERT_TRUE(rx->waitConnected(5)) << rx->lastError() << "\n" << broker.log();
+  ASSERT_TRUE(tx->waitConnected(5)) << tx->lastError();
+  pumpUntil({rx.get()}, 5, [&] { return rx->stats().subscribed == 1; });
+  ASSERT_TRUE(tx->publish("t", {7, 7, 7}, 2));
+  ASSERT_TRUE(pumpUntil({rx.get(), tx.get()}, 5, [&] { return rx->stats().received == 1; }));
+
+  MqttParams wrong_ca = p;
+  wrong_ca.tls.ca_file = other + "/ca.pem";
+  auto bad = client(wrong_ca, "hermes-test-tls-wrong-ca");
+  Status s = bad->waitConnected(1);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("cannot be reached"), std::string::npos) << s.error();
+  std::printf("wrong CA: %s\n", s.error().c_str());
+
+  MqttParams plain = testMqttParams(broker.port());
+  auto no_tls = client(plain, "hermes-test-tls-plain");
+  EXPECT_FALSE(no_tls->waitConnected(1).ok());
+
+  MqttParams missing = p;
+  missing.tls.ca_file = dir + "/nope.pem";
+  auto c = MqttClient::create(missing, "hermes-test-tls-missing", {});
+  ASSERT_FALSE(c.ok());
+  EXPECT_NE(c.error().find("nope.pem"), std::string::npos) << c.error();
 }

@@ -23,6 +23,10 @@ MqttParams testMqttParams(int port);
 struct BrokerOptions {
   bool persistence = false;   ///< true: sessions survive a restart (persistence file in the folder)
   std::string password_file;  ///< set: allow_anonymous false, users from this mosquitto_passwd file
+  /// Set: the listener speaks TLS with this CA, certificate and key (PEM files);
+  /// with require_certificate, clients need a certificate signed by the CA.
+  std::string tls_ca_file, tls_cert_file, tls_key_file;
+  bool require_certificate = false;
 };
 
 class MosquittoBroker {
