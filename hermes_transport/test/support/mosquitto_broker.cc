@@ -142,6 +142,21 @@ void MosquittoBroker::kill() {
   pid_ = -1;
 }
 
+bool MosquittoBroker::waitSaved(fs::file_time_type since, double timeout_s) const {
+  const std::string db = dir_ + "/mosquitto.db";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::error_code ec;
+    const auto written = fs::last_write_time(db, ec);
+    if (!ec && written > since) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the write itself to finish
+      return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return false;
+}
+
 std::string MosquittoBroker::log() const {
   std::string text;
   for (const char* name : {"/stdout.log", "/mosquitto.log"}) {

@@ -6,6 +6,7 @@
 
 #include <sys/types.h>
 
+#include <filesystem>
 #include <string>
 
 #include "hermes/transport/transport_params.h"
@@ -48,6 +49,9 @@ class MosquittoBroker {
   bool start();
   /// SIGKILL and reap.
   void kill();
+  /// With persistence: waits up to `timeout_s` until the broker has written its
+  /// database after `since` (its autosave runs every second); false if it did not.
+  bool waitSaved(std::filesystem::file_time_type since, double timeout_s) const;
   bool running() const { return pid_ > 0; }
   int port() const { return port_; }
   const std::string& error() const { return error_; }
