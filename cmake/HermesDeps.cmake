@@ -11,6 +11,8 @@ find_package(OpenSSL 3 REQUIRED)  # libcrypto: HMAC-SHA256 frame tags (Debian li
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(CBC REQUIRED IMPORTED_TARGET cbc osi-clp)
 pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
+# MQTT transport (hermes_transport): Debian libmosquitto-dev; tests run Debian's mosquitto broker.
+pkg_check_modules(MOSQUITTO REQUIRED IMPORTED_TARGET libmosquitto)
 if(HERMES_BUILD_TESTS)
   find_package(GTest REQUIRED)
   include(GoogleTest)

@@ -9,6 +9,14 @@
 // the kill may then be acknowledged as a duplicate only (its ack was lost with
 // the process), so each is acknowledged, accepted at most once, and the server
 // reports every one applied.
+// With ~transport mqtt (multi_agent_mqtt.test) the nodes talk through a real
+// mosquitto that this test starts on ~mqtt_port, and the test observes the
+// hermes/+/submap, /ack and /heartbeat topics through the broker instead of the
+// ROS topics. With ~restart_broker_after_accepted N it SIGKILLs the broker once N
+// submaps were accepted and starts it again 2 s later; submaps and acks of that
+// gap are not all seen by the observer, so, as with the server kill, each
+// submap the agents created (their uplink_status) must be acknowledged (their
+// spools drain), accepted at most once, and the server reports every one applied.
 #include <gtest/gtest.h>
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
@@ -37,6 +45,9 @@
 #include "hermes/core/frame_auth.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/core/wire_synthetic.h"
+#include "hermes/transport/mqtt_client.h"
+#include "hermes/transport/mqtt_messages.h"
+#include "mosquitto_broker.h"
 
 namespace {
 
@@ -53,7 +64,83 @@ struct Observed {
   std::map<std::uint32_t, nav_msgs::Path> paths;
   std::map<std::string, hermes::Trajectory> odom;  ///< per robot, body poses (odometry frame)
   std::string status;
+  std::map<std::string, nlohmann::json> uplink;  ///< per robot, its last uplink_status
 };
+
+/// MQTT mode: the broker this test runs (kept for every test of the process) and
+/// the parameters the nodes were given.
+std::unique_ptr<hermes::transport::test::MosquittoBroker> g_broker;
+hermes::transport::MqttParams g_mqtt;
+
+/// Starts the broker on ~mqtt_port once; false when there is no mosquitto binary.
+bool startBroker(int port) {
+  if (g_broker) return true;
+  if (hermes::transport::test::MosquittoBroker::binary().empty()) return false;
+  g_broker = std::make_unique<hermes::transport::test::MosquittoBroker>(
+      "/tmp/hermes_rostest_mqtt_broker_" + std::to_string(port), hermes::transport::test::BrokerOptions{}, port);
+  EXPECT_TRUE(g_broker->start()) << g_broker->error();
+  g_mqtt = hermes::transport::test::testMqttParams(port);
+  return true;
+}
+
+/// An observer client subscribed to every robot's channels.
+std::unique_ptr<hermes::transport::MqttClient> observer(const std::string& id) {
+  using hermes::transport::MqttChannel;
+  auto c = hermes::transport::MqttClient::create(
+      g_mqtt, id,
+      {{hermes::transport::mqttTopicAllAgents(MqttChannel::kSubmap), 2},
+       {hermes::transport::mqttTopicAllAgents(MqttChannel::kAck), 2},
+       {hermes::transport::mqttTopicAllAgents(MqttChannel::kHeartbeat), 0}});
+  EXPECT_TRUE(c.ok()) << c.error();
+  if (!c.ok()) return nullptr;
+  (*c)->start();
+  EXPECT_TRUE((*c)->waitConnected(5)) << (*c)->lastError();
+  return std::move(*c);
+}
+
+/// A small valid frame claiming to be `robot`'s seq `seq`, tagged with `key` if given.
+std::vector<std::uint8_t> forgedFrame(const std::string& robot, std::uint64_t seq, const hermes::FrameKey* key) {
+  hermes::SyntheticSubmapOptions opt;
+  opt.keyframes = 2;
+  opt.keypoints_per_keyframe = 30;
+  opt.landmarks = 20;
+  hermes::Submap s = hermes::makeSyntheticSubmap(opt);
+  s.header.agent = hermes::agentUuid(robot);
+  s.header.seq = seq;
+  auto f = hermes::encodeSubmap(s);
+  EXPECT_TRUE(f.ok());
+  if (key && f.ok()) f = hermes::signFrame(*f, *key);
+  return f.ok() ? *f : std::vector<std::uint8_t>();
+}
+
+/// Records what the observer saw, as the ROS subscriptions do.
+void observeMqtt(hermes::transport::MqttClient& client, Observed& o) {
+  using namespace hermes::transport;
+  for (MqttEvent& e : client.drain()) {
+    if (e.kind != MqttEvent::Kind::kMessage) continue;
+    auto topic = parseMqttTopic(e.topic);
+    if (!topic) continue;
+    std::lock_guard<std::mutex> l(o.mu);
+    if (topic->channel == MqttChannel::kSubmap) {
+      auto h = hermes::peekFrame(e.payload.data(), e.payload.size());
+      if (h) ++o.sent[Key{hermes::toString(h->routing.agent), h->routing.session, h->routing.seq}];
+    } else if (topic->channel == MqttChannel::kAck) {
+      auto a = decodeAck(e.payload.data(), e.payload.size());
+      if (!a) continue;
+      const Key k{hermes::toString(a->agent), a->session, a->seq};
+      if (a->status == AckStatus::kAccepted) ++o.accepted[k];
+      if (a->status == AckStatus::kDuplicate) {
+        ++o.duplicates;
+        ++o.duplicate[k];
+      }
+      if (a->status == AckStatus::kRejected) ++o.rejected;
+      o.uuid_of_robot[a->robot_id] = hermes::toString(a->agent);
+    } else {
+      auto hb = decodeHeartbeat(e.payload.data(), e.payload.size());
+      if (hb) o.name_of_uuid[hermes::toString(hb->agent)] = hb->name;
+    }
+  }
+}
 
 /// Process id of a node, asked through the master and the node's XML-RPC API; 0 if unknown.
 int nodePid(const std::string& node) {
@@ -91,7 +178,27 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
   std::string data;
   ASSERT_TRUE(pnh.getParam("data", data)) << "~data (rendered folder) is required";
   Observed o;
+  std::string transport = "ros";
+  pnh.param("transport", transport, transport);
+  const bool mqtt = transport == "mqtt";
+  int mqtt_port = 0, restart_broker_after = 0;
+  pnh.param("mqtt_port", mqtt_port, 0);
+  pnh.param("restart_broker_after_accepted", restart_broker_after, 0);
+  std::unique_ptr<hermes::transport::MqttClient> watcher;
+  if (mqtt) {
+    if (!startBroker(mqtt_port)) GTEST_SKIP() << "no mosquitto binary (apt-get install mosquitto)";
+    watcher = observer("hermes-rostest-observer");
+    ASSERT_TRUE(watcher);
+  }
   std::vector<ros::Subscriber> subs;
+  for (const auto& [robot, seq] : kSequence)
+    subs.push_back(nh.subscribe<std_msgs::String>(
+        "/" + robot + "/uplink_status", 5, [&o, robot = robot](const std_msgs::StringConstPtr& m) {
+          auto j = nlohmann::json::parse(m->data, nullptr, false);
+          std::lock_guard<std::mutex> l(o.mu);
+          if (j.is_object()) o.uplink[robot] = j;
+        }));
+  if (!mqtt) {
   subs.push_back(nh.subscribe<hermes_msgs::EncodedSubmap>(
       "/hermes/submap", 100, [&](const hermes_msgs::EncodedSubmapConstPtr& m) {
         std::lock_guard<std::mutex> l(o.mu);
@@ -113,6 +220,7 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
         std::lock_guard<std::mutex> l(o.mu);
         o.name_of_uuid[h->agent_uuid] = h->name;
       }));
+  }
   subs.push_back(nh.subscribe<std_msgs::String>("/hermes/status", 5, [&](const std_msgs::StringConstPtr& s) {
     std::lock_guard<std::mutex> l(o.mu);
     o.status = s->data;
@@ -141,6 +249,9 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
   int kill_after = 0;
   pnh.param("kill_server_after_accepted", kill_after, 0);
   int killed_pid = 0;
+  ros::WallTime broker_killed;
+  bool broker_restarted = false;
+  std::size_t accepted_at_broker_kill = 0;
   ros::AsyncSpinner spinner(2);
   spinner.start();
 
@@ -151,7 +262,20 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
   bool finished = false;
   while (ros::WallTime::now() < deadline && !finished) {
     ros::WallDuration(0.5).sleep();
+    if (watcher) observeMqtt(*watcher, o);
     std::lock_guard<std::mutex> l(o.mu);
+    if (restart_broker_after > 0 && broker_killed.isZero() &&
+        static_cast<int>(o.accepted.size()) >= restart_broker_after) {
+      accepted_at_broker_kill = o.accepted.size();
+      g_broker->kill();
+      broker_killed = ros::WallTime::now();
+      std::printf("killed the broker after %zu accepted submaps, %d players done\n", o.accepted.size(), o.done);
+    }
+    if (!broker_killed.isZero() && !broker_restarted && ros::WallTime::now() - broker_killed > ros::WallDuration(2.0)) {
+      ASSERT_TRUE(g_broker->start()) << g_broker->error();
+      broker_restarted = true;
+      o.status.clear();  // wait for a status after the restart
+    }
     if (kill_after > 0 && killed_pid == 0 && static_cast<int>(o.accepted.size()) >= kill_after) {
       killed_pid = nodePid("/hermes_server");
       ASSERT_GT(killed_pid, 0) << "cannot find the server's process";
@@ -163,8 +287,17 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
     if (o.done < 3) continue;
     if (all_done.isZero()) all_done = ros::WallTime::now();
     bool all_acked = !o.sent.empty();
-    for (const auto& [k, n] : o.sent)
-      all_acked = all_acked && (o.accepted.count(k) || (killed_pid && o.duplicate.count(k)));
+    if (restart_broker_after > 0) {  // the agents' spools say it: nothing left unacknowledged
+      all_acked = broker_restarted && o.uplink.size() == 3;
+      for (const auto& [robot, j] : o.uplink) {
+        all_acked = all_acked && j.value("done", false) && j.contains("pending") && j["pending"].empty();
+        for (const auto& key : j.value("created", nlohmann::json::array()))
+          o.sent.emplace(Key{j.value("uuid", ""), key[0].get<std::uint32_t>(), key[1].get<std::uint64_t>()}, 0);
+      }
+    } else {
+      for (const auto& [k, n] : o.sent)
+        all_acked = all_acked && (o.accepted.count(k) || (killed_pid && o.duplicate.count(k)));
+    }
     const auto j = nlohmann::json::parse(o.status.empty() ? "{}" : o.status, nullptr, false);
     const bool merged = j.is_object() && j.value("agents_merged", 0) == 3;
     finished = all_acked && merged && o.paths.size() == 3 &&
@@ -185,11 +318,22 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
       std::filesystem::remove_all(dir, ec);
     }
   }
+  if (restart_broker_after > 0) {
+    ASSERT_TRUE(broker_restarted) << "the broker was never killed and restarted";
+    EXPECT_LT(accepted_at_broker_kill, o.sent.size()) << "the broker was killed after the run";
+    for (const auto& [robot, j] : o.uplink) {
+      EXPECT_TRUE(j.contains("pending") && j["pending"].empty()) << robot << " has unacknowledged submaps";
+      EXPECT_EQ(j.value("transport", ""), "mqtt") << robot;
+      std::printf("%s uplink: %s\n", robot.c_str(), j.value("mqtt", nlohmann::json()).dump().c_str());
+    }
+  }
   std::set<std::string> agents;
   for (const auto& [k, n] : o.sent) {
     agents.insert(std::get<0>(k));
     const int accepted = o.accepted.count(k) ? o.accepted.at(k) : 0;
-    if (killed_pid) {
+    if (restart_broker_after > 0) {  // acks of the gap may be unseen; the spools drained (above)
+      EXPECT_LE(accepted, 1) << "submap " << std::get<0>(k) << " seq " << std::get<2>(k) << " accepted twice";
+    } else if (killed_pid) {
       EXPECT_LE(accepted, 1) << "submap " << std::get<0>(k) << " seq " << std::get<2>(k) << " accepted twice";
       EXPECT_TRUE(accepted == 1 || o.duplicate.count(k))
           << "submap " << std::get<0>(k) << " seq " << std::get<2>(k) << " never acknowledged";
@@ -249,7 +393,51 @@ int main(int argc, char** argv) {
 // without a key are refused with their reason code, while the agents above
 // were accepted.
 TEST(MultiAgent, UnauthenticatedFramesAreRefusedWithReasons) {
-  ros::NodeHandle nh;
+  ros::NodeHandle nh, pnh("~");
+  std::string transport = "ros";
+  pnh.param("transport", transport, transport);
+  if (transport == "mqtt") {
+    hermes::FrameKey stranger;
+    stranger.bytes.fill(0x42);
+    ASSERT_TRUE(g_broker) << "the first test starts the broker";
+    auto watcher = observer("hermes-rostest-forger");
+    ASSERT_TRUE(watcher);
+    ros::WallDuration(0.5).sleep();  // SUBACK
+    auto send = [&](const std::string& topic_robot, const std::string& robot, std::uint64_t seq,
+                    const hermes::FrameKey* key) {
+      ASSERT_TRUE(watcher->publish(hermes::transport::mqttTopic(topic_robot, hermes::transport::MqttChannel::kSubmap),
+                                   forgedFrame(robot, seq, key), 2));
+    };
+    send("agent0", "agent0", 900001, nullptr);     // no tag
+    send("agent0", "agent0", 900002, &stranger);   // not agent0's key
+    send("intruder", "intruder", 900003, &stranger);  // no key for this robot
+    send("intruder", "agent1", 900004, &stranger);    // agent1's identity on another robot's topic
+    std::map<std::uint64_t, hermes::transport::AckMessage> acks;
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+    while (acks.size() < 4 && ros::WallTime::now() < deadline) {
+      ros::WallDuration(0.1).sleep();
+      for (auto& e : watcher->drain()) {
+        auto t = hermes::transport::parseMqttTopic(e.topic);
+        if (e.kind != hermes::transport::MqttEvent::Kind::kMessage || !t ||
+            t->channel != hermes::transport::MqttChannel::kAck)
+          continue;
+        auto a = hermes::transport::decodeAck(e.payload.data(), e.payload.size());
+        if (a && a->seq >= 900000) acks[a->seq] = *a;
+      }
+    }
+    ASSERT_EQ(acks.size(), 4u) << "not every forged frame was answered";
+    const std::map<std::uint64_t, std::uint8_t> expected = {
+        {900001, hermes_msgs::SubmapAck::REASON_MISSING_TAG},
+        {900002, hermes_msgs::SubmapAck::REASON_BAD_TAG},
+        {900003, hermes_msgs::SubmapAck::REASON_UNKNOWN_ROBOT},
+        {900004, hermes_msgs::SubmapAck::REASON_ROUTING_MISMATCH}};
+    for (const auto& [seq, code] : expected) {
+      EXPECT_EQ(acks[seq].status, hermes::transport::AckStatus::kRejected) << seq;
+      EXPECT_EQ(acks[seq].reason_code, code) << seq << ": " << acks[seq].reason;
+      EXPECT_FALSE(acks[seq].reason.empty());
+    }
+    return;
+  }
   std::mutex mu;
   std::map<std::uint64_t, hermes_msgs::SubmapAck> acks;
   auto sub = nh.subscribe<hermes_msgs::SubmapAck>(
@@ -270,22 +458,14 @@ TEST(MultiAgent, UnauthenticatedFramesAreRefusedWithReasons) {
   hermes::FrameKey stranger_key;
   stranger_key.bytes.fill(0x42);
   auto frame = [&](const std::string& robot, std::uint64_t seq, const hermes::FrameKey* key) {
-    hermes::SyntheticSubmapOptions opt;
-    opt.keyframes = 2;
-    opt.keypoints_per_keyframe = 30;
-    opt.landmarks = 20;
-    hermes::Submap s = hermes::makeSyntheticSubmap(opt);
-    s.header.agent = hermes::agentUuid(robot);
-    s.header.seq = seq;
-    auto f = hermes::encodeSubmap(s);
-    EXPECT_TRUE(f.ok());
-    if (key) f = hermes::signFrame(*f, *key);
     hermes_msgs::EncodedSubmap m;
     m.header.stamp = ros::Time::now();
-    m.agent_uuid = hermes::toString(s.header.agent);
-    m.session = s.header.session;
+    m.data = forgedFrame(robot, seq, key);
+    const auto h = hermes::peekFrame(m.data.data(), m.data.size());
+    EXPECT_TRUE(h.ok());
+    m.agent_uuid = hermes::toString(hermes::agentUuid(robot));
+    m.session = h.ok() ? h->routing.session : 0;
     m.seq = seq;
-    m.data = *f;
     return m;
   };
   pub.publish(frame("agent0", 900001, nullptr));        // no tag

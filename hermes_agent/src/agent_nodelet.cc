@@ -38,6 +38,13 @@
 // missing or not private: the nodelet does not start). The uplink runs on
 // wall time. Images are paired under one mutex, the pipeline's calls are made
 // under another (its uplink thread calls the transport, which only publishes).
+// Transport (~transport, default: the config's `transport`): ros = the /hermes/*
+// topics above; mqtt = hermes/<robot>/submap, /ack, /heartbeat through the broker
+// of the config's mqtt.* (~mqtt_host, ~mqtt_port override host and port;
+// hermes_transport/mqtt_links.h): the link's events are handled by a 20 ms wall
+// timer under the pipeline mutex, after the pipeline exists (acks kept by the
+// broker for a previous run wait for it). An unreachable broker is reported and
+// tried again with backoff; the spool keeps everything meanwhile.
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/SubmapAck.h>
@@ -64,6 +71,7 @@
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/core/frame_auth.h"
+#include "hermes/transport/mqtt_links.h"
 #include "ros_convert.h"
 
 namespace hermes_agent {
@@ -123,6 +131,7 @@ class AgentNodelet : public nodelet::Nodelet {
     }
     params_ = run.agent;
     input_params_ = run.camera_input;
+    if (!setUpTransport(pnh, *config)) return;
     if (rectified != "auto") input_params_.stereo_images = rectified == "true" ? "rectified" : "raw";
     // Real time: tracking never waits for local BA or the window step (worker
     // threads, agent_threads.h); ~parallel false runs them inside the image
@@ -197,10 +206,14 @@ class AgentNodelet : public nodelet::Nodelet {
     topic_b_ = nh.resolveName(stereo ? "right/image" : "depth/image");
 
     odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 50);
-    submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
-    heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
     uplink_status_pub_ = nh.advertise<std_msgs::String>("uplink_status", 20, true);
-    ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
+    if (mqtt_) {
+      mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), &AgentNodelet::onMqtt, this);
+    } else {
+      submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
+      heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
+      ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
+    }
     done_sub_ = nh.subscribe("done", 1, &AgentNodelet::onDone, this);
     if (calibration_) {
       if (!createStream(*calibration_)) return;
@@ -226,6 +239,52 @@ class AgentNodelet : public nodelet::Nodelet {
                               : ("from " + infoTopic(topic_a_) +
                                  (stereo ? " + " + infoTopic(topic_b_) : std::string())).c_str(),
                  config_file.c_str(), params_.uplink.buffer.dir.c_str());
+  }
+
+  /// ~transport / the config's transport; with mqtt, the link to the broker.
+  bool setUpTransport(ros::NodeHandle& pnh, const hermes::Config& config) {
+    hermes::transport::TransportParams tp;
+    if (hermes::Status s = tp.read(config); !s) {
+      NODELET_FATAL("Agent %s: config: %s", robot_.c_str(), s.error().c_str());
+      return false;
+    }
+    std::string kind;
+    if (pnh.getParam("transport", kind) && !kind.empty()) tp.kind = kind;
+    pnh.param("mqtt_host", tp.mqtt.host, tp.mqtt.host);
+    pnh.param("mqtt_port", tp.mqtt.port, tp.mqtt.port);
+    if (hermes::Status s = tp.validate(); !s) {
+      NODELET_FATAL("Agent %s: ~transport / ~mqtt_*: %s", robot_.c_str(), s.error().c_str());
+      return false;
+    }
+    if (!tp.mqttEnabled()) return true;
+    auto link = hermes::transport::MqttAgentLink::create(tp.mqtt, robot_, hermes::agentUuid(robot_));
+    if (!link) {
+      NODELET_FATAL("Agent %s: %s", robot_.c_str(), link.error().c_str());
+      return false;
+    }
+    mqtt_ = std::move(*link);
+    mqtt_->client().start();
+    if (hermes::Status s = mqtt_->client().waitConnected(tp.mqtt.connect_timeout_s); !s)
+      NODELET_ERROR("Agent %s: %s; submaps wait in the spool", robot_.c_str(), s.error().c_str());
+    else
+      NODELET_INFO("Agent %s: uplink over MQTT, broker %s, client id %s", robot_.c_str(),
+                   mqtt_->client().broker().c_str(), mqtt_->client().clientId().c_str());
+    return true;
+  }
+
+  /// MQTT: acknowledgements, reconnections and problems since the last tick.
+  void onMqtt(const ros::WallTimerEvent&) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!pipeline_) return;  // the events wait in the link's inbox
+    hermes::transport::AgentLinkEvents ev = mqtt_->poll();
+    for (const std::string& p : ev.problems) NODELET_WARN_THROTTLE(2.0, "Agent %s: mqtt: %s", robot_.c_str(), p.c_str());
+    if (ev.connected_now)
+      NODELET_INFO("Agent %s: connected to MQTT broker %s%s", robot_.c_str(), mqtt_->client().broker().c_str(),
+                   ev.resend_all ? "; everything unacknowledged is sent again" : " (session resumed)");
+    if (ev.resend_all) pipeline_->onUplinkReconnect();
+    for (const hermes::transport::AckMessage& a : ev.acks)
+      handleAck(!a.acknowledges(), a.reason_code == hermes_msgs::SubmapAck::REASON_QUOTA, a.session, a.seq,
+                a.reason);
   }
 
   /// The core's pairing and conversion for `calib` (call with stream_mu_ held or
@@ -345,6 +404,12 @@ class AgentNodelet : public nodelet::Nodelet {
     }
     Status s = (*p)->attachUplink([this](std::uint32_t session, std::uint64_t seq,
                                          const std::vector<std::uint8_t>& frame) {
+      if (mqtt_) {  // offline: refused, the spool sends it again after the reconnect
+        if (Status sent = mqtt_->sendSubmap(frame); !sent)
+          NODELET_WARN_THROTTLE(5.0, "Agent %s: seq %lu not sent: %s", robot_.c_str(),
+                                static_cast<unsigned long>(seq), sent.error().c_str());
+        return;
+      }
       hermes_msgs::EncodedSubmap m;
       m.header.stamp = ros::Time::now();
       m.agent_uuid = uuid_;
@@ -398,19 +463,26 @@ class AgentNodelet : public nodelet::Nodelet {
   void onAck(const hermes_msgs::SubmapAckConstPtr& a) {
     std::lock_guard<std::mutex> lock(mu_);
     if (!pipeline_ || a->agent_uuid != uuid_) return;
-    if (a->status == hermes_msgs::SubmapAck::REJECTED) {
+    handleAck(a->status == hermes_msgs::SubmapAck::REJECTED,
+              a->reason_code == hermes_msgs::SubmapAck::REASON_QUOTA, a->session, a->seq, a->reason);
+  }
+
+  /// One acknowledgement of this robot's (ROS or MQTT; call with mu_ held).
+  void handleAck(bool rejected, bool quota, std::uint32_t session, std::uint64_t seq,
+                 const std::string& reason) {
+    if (rejected) {
       // Kept in the spool and resent after the timeout. A quota refusal is the
       // server's back-pressure, not an error; the others (bad tag, unknown
       // robot, ...) may also answer someone else's frame under this uuid.
-      if (a->reason_code == hermes_msgs::SubmapAck::REASON_QUOTA)
+      if (quota)
         NODELET_INFO_THROTTLE(5.0, "Agent %s: server busy, seq %lu resent later: %s",
-                              robot_.c_str(), static_cast<unsigned long>(a->seq), a->reason.c_str());
+                              robot_.c_str(), static_cast<unsigned long>(seq), reason.c_str());
       else
         NODELET_ERROR_THROTTLE(2.0, "Agent %s: server rejected seq %lu: %s", robot_.c_str(),
-                               static_cast<unsigned long>(a->seq), a->reason.c_str());
+                               static_cast<unsigned long>(seq), reason.c_str());
       return;
     }
-    if (Status s = pipeline_->onAck(a->session, a->seq, ros::WallTime::now().toSec()); !s)
+    if (Status s = pipeline_->onAck(session, seq, ros::WallTime::now().toSec()); !s)
       NODELET_WARN_THROTTLE(2.0, "Agent %s: %s", robot_.c_str(), s.error().c_str());
   }
 
@@ -440,6 +512,12 @@ class AgentNodelet : public nodelet::Nodelet {
     }
     if (now - last_heartbeat_ < 1.0) return;
     last_heartbeat_ = now;
+    if (mqtt_) {
+      const auto last = pipeline_->lastSubmitted();
+      mqtt_->sendHeartbeat(pipeline_->session(), last && last->first == pipeline_->session() ? last->second + 1 : 0);
+      publishUplinkStatus();
+      return;
+    }
     hermes_msgs::AgentHeartbeat hb;
     hb.header.stamp = ros::Time::now();
     hb.agent_uuid = uuid_;
@@ -521,6 +599,16 @@ class AgentNodelet : public nodelet::Nodelet {
       timings[stage] = {{"median", st.median}, {"p95", st.p95}, {"count", st.count}};
     j["timings_ms"] = timings;
     j["done"] = done_;
+    j["transport"] = mqtt_ ? "mqtt" : "ros";
+    if (mqtt_) {
+      const hermes::transport::MqttClientStats m = mqtt_->client().stats();
+      j["mqtt"] = {{"broker", mqtt_->client().broker()}, {"connected", mqtt_->client().connected()},
+                   {"connects", m.connects}, {"sessions_resumed", m.sessions_resumed},
+                   {"losses", m.losses}, {"failed_attempts", m.failed_attempts},
+                   {"published", m.published}, {"refused", m.refused}, {"received", m.received},
+                   {"dropped", m.dropped}, {"malformed", mqtt_->malformed()},
+                   {"last_error", mqtt_->client().lastError()}};
+    }
     j["frames"] = frameCounts();
     std_msgs::String m;
     m.data = j.dump();
@@ -539,6 +627,9 @@ class AgentNodelet : public nodelet::Nodelet {
   std::string info_error_;  ///< the last camera_info problem (logged when it changes)
   std::unique_ptr<hermes::agent::CameraStream> stream_;
   std::map<double, ros::Time> exact_stamps_;  ///< left / colour header stamps by seconds
+  /// Set: transport mqtt. Declared before the pipeline, whose uplink thread uses it
+  /// until the pipeline is gone.
+  std::unique_ptr<hermes::transport::MqttAgentLink> mqtt_;
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
   std::int64_t received_a_ = 0, received_b_ = 0, no_camera_ = 0, malformed_ = 0;
   std::int64_t tracked_ = 0, feed_errors_ = 0;
@@ -547,7 +638,7 @@ class AgentNodelet : public nodelet::Nodelet {
   bool done_ = false;
   ros::Subscriber ack_sub_, done_sub_, info_a_sub_, info_b_sub_, image_a_sub_, image_b_sub_;
   tf2_ros::TransformBroadcaster tf_;
-  ros::WallTimer timer_;
+  ros::WallTimer timer_, mqtt_timer_;
   double last_heartbeat_ = 0;
   double last_retry_ = 0;  ///< wall time of the last retry of a carried window
 };

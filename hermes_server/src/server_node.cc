@@ -20,6 +20,13 @@
 // journals every submap before acknowledging it, checkpoints after merges and
 // on shutdown, and resumes from it on start; the core does all of it, see
 // hermes/server/server.h).
+// ~transport (ros | mqtt; default: the config's `transport`), ~mqtt_host,
+// ~mqtt_port (override mqtt.host / mqtt.port): with mqtt the submaps and
+// heartbeats come from hermes/+/submap and hermes/+/heartbeat through the broker
+// and every ack goes to hermes/<robot>/ack (hermes_transport/mqtt_links.h),
+// handled by a 20 ms wall timer on the spinner thread; /hermes/submap,
+// /hermes/heartbeat and /hermes/submap_ack are then not used. An unreachable
+// broker is reported and tried again with backoff.
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/SubmapAck.h>
@@ -38,6 +45,7 @@
 #include "hermes/agent/run_config.h"
 #include "hermes/server/server.h"
 #include "hermes/server/server_outputs.h"
+#include "hermes/transport/mqtt_links.h"
 
 namespace {
 
@@ -100,15 +108,20 @@ sensor_msgs::PointCloud2 toCloud(const std::vector<hermes::Vec3>& points, const 
 
 class ServerNode {
  public:
-  ServerNode(std::unique_ptr<Server> server, std::string output_dir, double period)
-      : server_(std::move(server)), output_dir_(std::move(output_dir)) {
+  ServerNode(std::unique_ptr<Server> server, std::string output_dir, double period,
+             std::unique_ptr<hermes::transport::MqttServerLink> mqtt)
+      : server_(std::move(server)), output_dir_(std::move(output_dir)), mqtt_(std::move(mqtt)) {
     ros::NodeHandle nh;
-    ack_pub_ = nh.advertise<hermes_msgs::SubmapAck>("/hermes/submap_ack", 100);
     status_pub_ = nh.advertise<std_msgs::String>("/hermes/status", 10, true);
     map_pub_ = nh.advertise<sensor_msgs::PointCloud2>("/hermes/global_map", 1, true);
     loops_pub_ = nh.advertise<visualization_msgs::Marker>("/hermes/loops", 1, true);
-    submap_sub_ = nh.subscribe("/hermes/submap", 100, &ServerNode::onSubmap, this);
-    hb_sub_ = nh.subscribe("/hermes/heartbeat", 10, &ServerNode::onHeartbeat, this);
+    if (mqtt_) {
+      mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), [this](const ros::WallTimerEvent&) { onMqtt(); });
+    } else {
+      ack_pub_ = nh.advertise<hermes_msgs::SubmapAck>("/hermes/submap_ack", 100);
+      submap_sub_ = nh.subscribe("/hermes/submap", 100, &ServerNode::onSubmap, this);
+      hb_sub_ = nh.subscribe("/hermes/heartbeat", 10, &ServerNode::onHeartbeat, this);
+    }
     process_timer_ = nh.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent&) {
       if (server_->process(ros::WallTime::now().toSec(), 1) > 0) dirty_ = true;
     });
@@ -153,6 +166,25 @@ class ServerNode {
       ROS_WARN_THROTTLE(1.0, "hermes_server: rejected submap from '%s' seq %lu: %s",
                         m->agent_uuid.c_str(), static_cast<unsigned long>(m->seq), r.reason.c_str());
     ack_pub_.publish(makeAck(*m, r));  // rejections are answered too, with the reason
+  }
+
+  /// MQTT: every frame received since the last tick, answered on its robot's ack topic.
+  void onMqtt() {
+    hermes::transport::ServerLinkEvents ev = mqtt_->poll();
+    for (const std::string& p : ev.problems) ROS_WARN_THROTTLE(1.0, "hermes_server: mqtt: %s", p.c_str());
+    for (const hermes::transport::HeartbeatMessage& hb : ev.heartbeats)
+      if (names_.emplace(hermes::toString(hb.agent), hb.name).second)
+        ROS_INFO("hermes_server: agent %s is '%s' (MQTT)", hermes::toString(hb.agent).c_str(), hb.name.c_str());
+    for (const hermes::transport::IncomingFrame& f : ev.frames) {
+      const double now = ros::WallTime::now().toSec();
+      const hermes::ReceiveResult r =
+          mqtt_->handle(f, [&](const std::uint8_t* d, std::size_t n, const hermes::SubmapHeader* claimed) {
+            return server_->onFrame(d, n, claimed, now);
+          });
+      if (r.verdict == hermes::ArrivalVerdict::kRejected)
+        ROS_WARN_THROTTLE(1.0, "hermes_server: rejected submap on hermes/%s/submap seq %lu: %s", f.agent.c_str(),
+                          static_cast<unsigned long>(r.routing.seq), r.reason.c_str());
+    }
   }
 
   void onHeartbeat(const hermes_msgs::AgentHeartbeatConstPtr& h) {
@@ -247,6 +279,8 @@ class ServerNode {
 
   std::unique_ptr<Server> server_;
   std::string output_dir_;
+  std::unique_ptr<hermes::transport::MqttServerLink> mqtt_;  ///< set: transport mqtt
+  ros::WallTimer mqtt_timer_;
   ros::Publisher ack_pub_, status_pub_, map_pub_, loops_pub_;
   std::map<hermes::RobotId, ros::Publisher> path_pubs_;
   std::map<std::string, std::string> names_;
@@ -279,6 +313,33 @@ int main(int argc, char** argv) {
     ROS_FATAL("hermes_server: %s", config.error().c_str());
     return 2;
   }
+  hermes::transport::TransportParams transport;
+  if (auto s = transport.read(*config); !s) {
+    ROS_FATAL("hermes_server: %s (in %s)", s.error().c_str(), config_file.c_str());
+    return 2;
+  }
+  if (std::string kind; pnh.getParam("transport", kind) && !kind.empty()) transport.kind = kind;
+  pnh.param("mqtt_host", transport.mqtt.host, transport.mqtt.host);
+  pnh.param("mqtt_port", transport.mqtt.port, transport.mqtt.port);
+  if (auto s = transport.validate(); !s) {
+    ROS_FATAL("hermes_server: ~transport / ~mqtt_*: %s", s.error().c_str());
+    return 2;
+  }
+  std::unique_ptr<hermes::transport::MqttServerLink> mqtt;
+  if (transport.mqttEnabled()) {
+    auto link = hermes::transport::MqttServerLink::create(transport.mqtt);
+    if (!link.ok()) {
+      ROS_FATAL("hermes_server: %s", link.error().c_str());
+      return 2;
+    }
+    mqtt = std::move(*link);
+    mqtt->client().start();
+    if (auto s = mqtt->client().waitConnected(transport.mqtt.connect_timeout_s); !s)
+      ROS_ERROR("hermes_server: %s", s.error().c_str());
+    else
+      ROS_INFO("hermes_server: submaps over MQTT, broker %s, client id %s", mqtt->client().broker().c_str(),
+               mqtt->client().clientId().c_str());
+  }
   hermes::server::ServerParams params;
   if (auto s = params.read(*config, "server."); !s) {
     ROS_FATAL("hermes_server: %s (in %s)", s.error().c_str(), config_file.c_str());
@@ -302,7 +363,7 @@ int main(int argc, char** argv) {
              resume.checkpoint.empty() ? "the journal" : resume.checkpoint.c_str(),
              resume.journal_replayed, resume.load_ms, (*server)->bookkeeper().robots().size(),
              (*server)->pending());
-  ServerNode node(std::move(*server), output_dir, period);
+  ServerNode node(std::move(*server), output_dir, period, std::move(mqtt));
   const std::string auth = params.auth.enabled ? "on, keys in " + params.auth.key_dir : "OFF";
   ROS_INFO("hermes_server: ready (config %s; authentication %s%s%s)", config_file.c_str(),
            auth.c_str(), params.checkpoint.enabled() ? "; checkpoints in " : "",

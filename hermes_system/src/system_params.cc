@@ -78,12 +78,13 @@ Status SystemParams::read(const Config& config) {
   if (Status s = link.read(config); !s) return s;
   if (Status s = clock.read(config); !s) return s;
   if (Status s = corrupt.read(config); !s) return s;
+  if (Status s = transport.read(config); !s) return s;
   return validate();
 }
 
 Status SystemParams::validate() const {
   for (Status s : {run.validate(), server.validate(), link.validate(), clock.validate(),
-                   corrupt.validate()})
+                   corrupt.validate(), transport.validate()})
     if (!s) return s;
   return Status::Ok();
 }
@@ -95,6 +96,7 @@ std::string SystemParams::yaml() const {
   link.write(w);
   clock.write(w);
   corrupt.write(&w);
+  transport.write(w);
   return w.yaml();
 }
 

@@ -130,6 +130,11 @@ Status AgentPipeline::onAck(std::uint32_t session, std::uint64_t seq, double now
   return uplink_->onAck(session, seq, now);
 }
 
+void AgentPipeline::onUplinkReconnect() {
+  std::lock_guard<std::mutex> lock(uplink_mu_);
+  if (uplink_) uplink_->onReconnect();
+}
+
 void AgentPipeline::pollUplink(double now) {
   std::lock_guard<std::mutex> lock(uplink_mu_);
   if (uplink_) uplink_->poll(now);

@@ -1,6 +1,7 @@
 // Configuration of a whole-system run (hermes_run): the agent pipeline, dataset
 // reading and evaluation (agent::RunParams), the edge server (section server),
-// and the emulated network plus the runner's own clock (section link, system).
+// and the emulated network plus the runner's own clock (section link, system);
+// the ROS nodes' transport (transport, mqtt) is checked too.
 // Read from one Config; a key no module reads is an error.
 #pragma once
 
@@ -13,6 +14,7 @@
 #include "hermes/core/config.h"
 #include "hermes/core/link_trace.h"
 #include "hermes/server/server.h"
+#include "hermes/transport/transport_params.h"
 
 namespace hermes::system {
 
@@ -55,6 +57,9 @@ struct SystemParams {
   LinkParams link;                ///< section link
   ClockParams clock;              ///< section system
   agent::OdometryCorruptionParams corrupt;  ///< section corrupt (test hook)
+  /// Keys transport, mqtt: read by the ROS nodes; checked here, unused by the
+  /// offline runner (its agents always talk over the emulated link).
+  transport::TransportParams transport;
 
   Status read(const Config& config);
   Status validate() const;

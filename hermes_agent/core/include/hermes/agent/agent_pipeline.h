@@ -121,6 +121,9 @@ class AgentPipeline {
   Status onAck(std::uint32_t session, std::uint64_t seq, double now);
   /// Lets the uplink send what it may at uplink time `now` (feed() also does).
   void pollUplink(double now);
+  /// The transport lost what was in flight (e.g. an MQTT broker that forgot our
+  /// session): everything unacknowledged is sent again (UplinkSender::onReconnect).
+  void onUplinkReconnect();
   /// End of the sequence: distils and submits the open (partial) window now.
   /// Parallel mode: first finishes the local BAs, and returns once the uplink
   /// stage has distilled and submitted everything queued.
