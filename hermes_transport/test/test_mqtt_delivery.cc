@@ -93,7 +93,9 @@ struct AgentSide {
   std::size_t pending_at_close = 0, malformed = 0;  ///< as of close()
 
   AgentSide(std::string robot, const MqttParams& p) : name(std::move(robot)), mqtt(p) {
-    up.buffer.dir = ::testing::TempDir() + "/mqtt_spool_" + name;
+    // Per test: ctest runs the tests of this file as parallel processes.
+    up.buffer.dir = ::testing::TempDir() + "/mqtt_spool_" +
+                    ::testing::UnitTest::GetInstance()->current_test_info()->name() + "_" + name;
     std::filesystem::remove_all(up.buffer.dir);
     up.buffer.fsync = false;
     up.buffer.resend_timeout_s = 2.0;
