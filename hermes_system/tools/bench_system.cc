@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hermes/core/render_cache.h"
+#include "hermes/system/dataset_window.h"
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
 
@@ -50,11 +51,16 @@ const char* kUsage =
     "                   false_candidates only unlimited)\n"
     "  --set KEY=VALUE  configuration override for every run (repeatable; e.g.\n"
     "                   distill.k_max=300); the variant's own settings win\n"
-    "  --swarm L        instead: swarm sizes (e.g. 2,4,6,8,10; at most 12) sharing one\n"
-    "                   --swarm-bandwidth link (default 50 Mbit/s, paper Fig. 18); robots\n"
-    "                   are the hall's trajectories from 0, 20, 40, 60 s; variants\n"
-    "                   default to hermes,raw\n"
+    "  --swarm L        instead: swarm sizes (e.g. 2,5,10,15,20) sharing one\n"
+    "                   --swarm-bandwidth link (default 50 Mbit/s, paper Fig. 18); robot k\n"
+    "                   flies --duration s of sequence k mod S (of --swarm-sequences) from\n"
+    "                   start 20 * (k / S) s: time windows of whole-sequence renders in\n"
+    "                   one hall; variants default to hermes,raw\n"
     "  --swarm-bandwidth M  shared link of the swarm sweep [Mbit/s] (default 50)\n"
+    "  --swarm-data DIR     whole-sequence renders (default data_cache/mh_full; rendered\n"
+    "                   from ../shared/data/euroc_gt when a sequence is missing)\n"
+    "  --swarm-sequences L  (default MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,\n"
+    "                   MH_05_difficult)\n"
     "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
 
 std::vector<std::string> split(const std::string& s) {
@@ -100,6 +106,13 @@ void injectFalseCandidates(system::OfflineRun& run, double fraction, std::size_t
   });
 }
 
+double loadAverage() {
+  std::ifstream f("/proc/loadavg");
+  double l = -1;
+  f >> l;
+  return l;
+}
+
 using Robots = std::vector<std::pair<std::string, fs::path>>;  // name, dataset folder
 
 /// The three hall robots rendered from `start` seconds of their trajectories
@@ -122,16 +135,33 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
   return data;
 }
 
-/// Swarm of n robots: the hall's three trajectories from starts 0, 20, 40, 60 s.
-Expected<Robots> swarmRobots(const std::string& cache, double duration, double rate, int n) {
+/// Swarm of n robots: robot k flies `duration` s of sequence k mod S from
+/// start 20 * (k / S) s, a window view (dataset_window.h) of the whole-sequence
+/// render in `data` (rendered there first when a sequence is missing), written
+/// under `views`.
+Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::string>& seqs,
+                             const std::string& views, double duration, double rate, int n) {
+  for (const std::string& seq : seqs) {
+    if (fs::exists(fs::path(data) / seq / "mav0")) continue;
+    RenderRequest req;  // all of them in one scene
+    for (const std::string& s : seqs)
+      req.trajectories.push_back(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/" + s + ".txt");
+    req.rate_hz = rate;
+    if (Status s = hermes::renderCached(req, data); !s) return Error{s.error()};
+    break;
+  }
   Robots robots;
-  for (int k = 0; static_cast<int>(robots.size()) < n; ++k) {
-    const double start = 20.0 * k;
-    auto data = renderCached(cache, duration, rate, start);
-    if (!data.ok()) return Error{data.error()};
-    for (const char* seq : kSeqs)
-      if (static_cast<int>(robots.size()) < n)
-        robots.push_back({std::string(seq) + (k ? "_s" + std::to_string(20 * k) : ""), *data / seq});
+  for (int k = 0; k < n; ++k) {
+    const std::string& seq = seqs[k % seqs.size()];
+    const int start = 20 * (k / static_cast<int>(seqs.size()));
+    const std::string name = seq + (start ? "_s" + std::to_string(start) : "");
+    const fs::path view = fs::path(views) / name;
+    auto w = system::writeEurocWindow((fs::path(data) / seq).string(), start, duration, view.string());
+    if (!w.ok()) return Error{w.error()};
+    if (w->frames + 1 < duration * rate * 0.9)
+      return Error{"swarm robot " + name + ": " + seq + " holds only " + std::to_string(w->frames) +
+                   " frames from " + std::to_string(start) + " s (a smaller swarm or --duration)"};
+    robots.push_back({name, view});
   }
   return robots;
 }
@@ -170,6 +200,13 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   j["bandwidth_mbitps"] = std::atof(bw.c_str());
   j["wall_s"] = wall;
   j["lost_messages"] = (*run)->lostMessages();
+  // Server memory: its whole state as a checkpoint holds it (map, queue, loops,
+  // graph), and the peak of what it held for robots awaiting merge.
+  j["server_state_bytes"] = (*run)->server().saveState().size();
+  std::int64_t held_peak = 0;
+  for (const AgentMetrics& a : r.metrics.per_agent) held_peak += a.held_bytes_peak.value_or(0);
+  j["server_held_bytes_peak_sum"] = held_peak;
+  j["load_avg_1min"] = loadAverage();
   if (v == "false_candidates") j["injected_false_candidates"] = injected;
   double lost = 0;
   int n = 0;
@@ -180,6 +217,21 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   std::error_code ec;
   fs::remove_all(spool, ec);  // the run's own files, not results
   return j;
+}
+
+double timing(const nlohmann::json& j, const char* stage, const char* stat) {
+  if (!j.contains("timings_ms") || !j["timings_ms"].contains(stage)) return std::nan("");
+  return j["timings_ms"][stage][stat].get<double>();
+}
+
+/// One row of the swarm table.
+void printSwarmRow(const std::string& v, const nlohmann::json& j) {
+  auto num = [&](const char* k) { return j.contains(k) && j[k].is_number() ? j[k].get<double>() : std::nan(""); };
+  std::fprintf(stderr, "%-7s %3zu %4.0f/%-3zu %8.2f %9.0f %6.0f/%-6.0f %6.1f %8.0f %8.0f %9.1f %6.0f %5.2f\n",
+               v.c_str(), j["agents"].get<std::size_t>(), num("agents_merged"), j["agents"].get<std::size_t>(),
+               num("ate_rmse_m") * 100, num("bytes_total") / 1000.0, num("kBps_mean"), num("kBps_peak"),
+               num("tracking_lost_rate_mean") * 100, timing(j, "submap", "median"), timing(j, "submap", "p95"),
+               num("server_state_bytes") / 1e6, num("wall_s"), num("load_avg_1min"));
 }
 
 void printRow(const std::string& v, const std::string& bw, const nlohmann::json& j) {
@@ -212,6 +264,9 @@ int main(int argc, char** argv) {
   std::string json_out;
   std::vector<std::string> swarm;
   std::string swarm_bw = "50";
+  std::string swarm_data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
+  std::vector<std::string> swarm_seqs =
+      split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult");
   std::vector<std::string> overrides;
   bool variants_given = false;
   for (int i = 1; i < argc; ++i) {
@@ -241,6 +296,10 @@ int main(int argc, char** argv) {
       swarm = split(next());
     } else if (a == "--swarm-bandwidth") {
       swarm_bw = next();
+    } else if (a == "--swarm-data") {
+      swarm_data = next();
+    } else if (a == "--swarm-sequences") {
+      swarm_seqs = split(next());
     } else if (a == "--set") {
       overrides.push_back(next());
     } else if (a == "--json") {
@@ -263,24 +322,32 @@ int main(int argc, char** argv) {
   if (!swarm.empty()) {
     if (!variants_given) variants = {"hermes", "raw"};
     for (const std::string& n : swarm)
-      if (std::atoi(n.c_str()) < 1 || std::atoi(n.c_str()) > 12)
-        return std::fprintf(stderr, "hermes_bench_system: swarm size '%s' not in 1..12\n", n.c_str()), 2;
+      if (std::atoi(n.c_str()) < 1 || std::atoi(n.c_str()) > 40)
+        return std::fprintf(stderr, "hermes_bench_system: swarm size '%s' not in 1..40\n", n.c_str()), 2;
+    if (swarm_seqs.empty()) return std::fprintf(stderr, "hermes_bench_system: --swarm-sequences is empty\n"), 2;
   }
   if (!swarm.empty()) {
     nlohmann::json runs = nlohmann::json::array();
-    std::fprintf(stderr, "%-13s %9s %7s %10s %9s %9s %7s %8s\n", "variant", "Mbit/s", "merged",
-                 "ATE [cm]", "kB", "kB/s", "loops", "wall [s]");
+    const std::string views =
+        (fs::temp_directory_path() / ("hermes_bench_swarm_views_" + std::to_string(::getpid()))).string();
+    std::fprintf(stderr, "%-7s %3s %8s %8s %9s %13s %6s %8s %8s %9s %6s %5s\n", "variant", "n", "merged",
+                 "ATE[cm]", "kB", "kB/s mean/pk", "lost%", "srv med", "srv p95", "state MB", "wall", "load");
     for (const std::string& n : swarm) {
-      auto robots = swarmRobots(cache, duration, rate, std::atoi(n.c_str()));
+      auto robots = swarmRobots(swarm_data, swarm_seqs, views, duration, rate, std::atoi(n.c_str()));
       if (!robots.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", robots.error().c_str()), 1;
       for (const std::string& v : variants) {
         auto j = runVariant(v, swarm_bw, *robots, overrides);
         if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
-        printRow(v, swarm_bw, *j);
+        printSwarmRow(v, *j);
         runs.push_back(*j);
+        if (!json_out.empty())  // a long sweep keeps what it has
+          (void)writeJson({{"bench", "system_swarm"}, {"partial", true}, {"runs", runs}}, json_out);
       }
     }
-    return writeJson({{"bench", "system_swarm"}, {"duration_s", duration}, {"rate_hz", rate},
+    std::error_code ec;
+    fs::remove_all(views, ec);
+    return writeJson({{"bench", "system_swarm"}, {"data", swarm_data}, {"sequences", swarm_seqs},
+                      {"duration_s", duration}, {"rate_hz", rate},
                       {"bandwidth_mbitps", std::atof(swarm_bw.c_str())}, {"overrides", overrides},
                       {"runs", runs}},
                      json_out);

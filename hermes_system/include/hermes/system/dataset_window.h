@@ -1,0 +1,27 @@
+// A time window of a EuRoC sequence folder as a dataset folder of its own,
+// without copying images: camX/data.csv keeps the rows whose stamps lie in
+// [first + start_s, first + start_s + duration_s), camX/data and every other
+// entry (sensor.yaml, ground truth, body.yaml) are symbolic links to the
+// source. How the swarm sweep makes 20 robots out of five whole-sequence
+// renders (time-shifted robots in one hall) without rendering again.
+#pragma once
+
+#include <string>
+
+#include "hermes/core/status.h"
+
+namespace hermes::system {
+
+struct WindowInfo {
+  std::size_t frames = 0;     ///< cam0 rows kept
+  double first_stamp_s = 0;   ///< stamp of the first kept row [s]
+};
+
+/// Writes the view of `source` (a sequence folder holding mav0/) into `out`
+/// (created; an existing view there is replaced). Errors name the file: a
+/// source without mav0/cam0/data.csv, an unreadable row, or a window holding
+/// no frame.
+Expected<WindowInfo> writeEurocWindow(const std::string& source, double start_s, double duration_s,
+                                      const std::string& out);
+
+}  // namespace hermes::system
