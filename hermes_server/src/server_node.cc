@@ -132,7 +132,7 @@ class ServerNode {
   /// Merges what is left, optimises once more and writes the results folder.
   void finish() {
     server_->process(ros::WallTime::now().toSec());
-    if (auto s = server_->mapManager().optimize(); !s)
+    if (auto s = server_->mapManager().optimize(/*full=*/true); !s)
       ROS_WARN("hermes_server: final optimisation: %s", s.error().c_str());
     if (auto s = server_->checkpoint(ros::WallTime::now().toSec()); !s)
       ROS_ERROR("hermes_server: last checkpoint: %s", s.error().c_str());

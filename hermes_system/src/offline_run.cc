@@ -300,7 +300,7 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
   }
   // Whatever arrived is merged, and the graph is optimised once more.
   server_->process(now_);
-  if (Status s = server_->mapManager().optimize(); !s) return s;
+  if (Status s = server_->mapManager().optimize(/*full=*/true); !s) return s;
   return server_->checkpoint(now_);  // clean shutdown (no-op without a checkpoint directory)
 }
 

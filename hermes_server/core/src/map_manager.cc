@@ -2,6 +2,8 @@
 
 #include "hermes/server/pose_graph_io.h"
 
+#include "hermes/core/parallel_jobs.h"
+
 #include <algorithm>
 #include <chrono>
 
@@ -31,7 +33,8 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"max_candidates_per_keyframe", &max_candidates_per_keyframe},
                    IntKey{"spatial_candidates", &spatial_candidates},
                    IntKey{"optimize_every_submaps", &optimize_every_submaps},
-                   IntKey{"min_world_loops", &min_world_loops}})
+                   IntKey{"min_world_loops", &min_world_loops},
+                   IntKey{"loop_threads", &loop_threads}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
   for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
@@ -56,6 +59,7 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "spatial_radius_m", spatial_radius_m);
   out.set(p + "spatial_max_angle_deg", spatial_max_angle_deg);
   out.set(p + "min_world_loops", min_world_loops);
+  out.set(p + "loop_threads", loop_threads);
 }
 
 Status MapManagerParams::validate() const {
@@ -68,6 +72,7 @@ Status MapManagerParams::validate() const {
     return Error{"spatial_max_angle_deg must be in (0, 180]"};
   if (Status s = odometry.validate(); !s) return Error{"odometry: " + s.error()};
   if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
+  if (loop_threads < 1 || loop_threads > 64) return Error{"loop_threads must be in 1..64"};
   return Status::Ok();
 }
 
@@ -138,6 +143,7 @@ void MapManager::storeSubmap(RobotId robot, const Submap& submap,
       (void)chain_.addEdge(keyOf(t, prev_id), key, info);
     }
     added->push_back(key);
+    touched_.insert(key);
   }
   for (const Landmark& lm : submap.landmarks) {
     auto it = t.landmarks.find(lm.id);
@@ -181,19 +187,37 @@ std::vector<const Keyframe*> MapManager::neighbours(const KeyframeKey& key,
   return out;
 }
 
-std::optional<LoopEdge> MapManager::closeLoop(const KeyframeKey& query,
-                                              const KeyframeKey& candidate,
-                                              LoopClosureResult* result) {
+LoopClosureResult MapManager::verifyPair(const KeyframeKey& query, const KeyframeKey& candidate) const {
+  LoopClosureResult r;
   const StoredKeyframe* q = map_.keyframe(query);
   const StoredKeyframe* c = map_.keyframe(candidate);
-  if (!q || !c || query == candidate) return std::nullopt;
+  if (!q || !c || query == candidate) {
+    r.reason = "keyframe not stored or the query itself";
+    return r;
+  }
   std::vector<PinholeIntrinsics> qcams, ccams;
   const std::vector<const Keyframe*> qn = neighbours(query, &qcams);
   const std::vector<const Keyframe*> cn = neighbours(candidate, &ccams);
+  return closer_.close(q->keyframe, qn, qcams, c->keyframe, cn, ccams);
+}
+
+std::vector<LoopClosureResult> MapManager::verifyPairs(
+    const std::vector<std::pair<KeyframeKey, KeyframeKey>>& pairs) {
+  std::vector<LoopClosureResult> results(pairs.size());
+  std::vector<double> ms(pairs.size(), 0.0);
   const auto t0 = Clock::now();
-  LoopClosureResult r = closer_.close(q->keyframe, qn, qcams, c->keyframe, cn, ccams);
-  timings_.add("loop_closure", msSince(t0));
-  if (result) *result = r;
+  runParallelJobs(pairs.size(), params_.loop_threads, [&](std::size_t i) {
+    const auto t = Clock::now();
+    results[i] = verifyPair(pairs[i].first, pairs[i].second);
+    ms[i] = msSince(t);
+  });
+  if (!pairs.empty()) timings_.add("loop_batch", msSince(t0));
+  for (double m : ms) timings_.add("loop_closure", m);
+  return results;
+}
+
+std::optional<LoopEdge> MapManager::loopEdge(const KeyframeKey& query, const KeyframeKey& candidate,
+                                             const LoopClosureResult& r) const {
   if (!r.ok()) return std::nullopt;
   LoopEdge e;
   e.a = query;
@@ -207,39 +231,53 @@ std::optional<LoopEdge> MapManager::closeLoop(const KeyframeKey& query,
   return e;
 }
 
-void MapManager::detectLoops(const KeyframeKey& key, MergeStats* stats) {
-  const StoredKeyframe* q = map_.keyframe(key);
-  auto t0 = Clock::now();
-  const BowVector bow = recognizer_.bow(q->keyframe.descriptors);
-  PlaceQueryResult places = recognizer_.query(key, q->keyframe.stamp, bow);
-  (void)recognizer_.addBow(key, q->keyframe.stamp, bow);
-  timings_.add("place_recognition", msSince(t0));
-  if (candidate_hook_) candidate_hook_(key, &places.candidates);
-  stats->place_candidates += static_cast<int>(places.candidates.size());
-  if (attempt_hook_ && places.candidates.empty())
-    attempt_hook_(LoopAttempt{key, std::nullopt, false, LoopStatus::kBadInput, "", 0, 0});
-  std::vector<KeyframeKey> tried;
-  auto attempt = [&](const PlaceCandidate& c, bool spatial) {
-    tried.push_back(c.key);
+void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* stats) {
+  // Candidates first (place recognition sees the keyframes in order; nothing
+  // here depends on the loops found), then every closure side by side, then
+  // the results in the candidates' order.
+  std::vector<LoopJob> jobs;
+  for (const KeyframeKey& key : added) {
+    const StoredKeyframe* q = map_.keyframe(key);
+    auto t0 = Clock::now();
+    const BowVector bow = recognizer_.bow(q->keyframe.descriptors);
+    PlaceQueryResult places = recognizer_.query(key, q->keyframe.stamp, bow);
+    (void)recognizer_.addBow(key, q->keyframe.stamp, bow);
+    timings_.add("place_recognition", msSince(t0));
+    if (candidate_hook_) candidate_hook_(key, &places.candidates);
+    stats->place_candidates += static_cast<int>(places.candidates.size());
+    if (places.candidates.empty()) jobs.push_back(LoopJob{key, std::nullopt, false});
+    std::vector<KeyframeKey> tried;
+    for (const PlaceCandidate& c : places.candidates) {
+      if (static_cast<int>(tried.size()) >= params_.max_candidates_per_keyframe) break;
+      if (!map_.keyframe(c.key) || c.key == key) continue;
+      tried.push_back(c.key);
+      jobs.push_back(LoopJob{key, c, false});
+    }
+    for (const KeyframeKey& k : spatialCandidates(key, q->keyframe.stamp, tried)) {
+      PlaceCandidate c;
+      c.key = k;
+      jobs.push_back(LoopJob{key, c, true});
+    }
+  }
+  std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
+  for (const LoopJob& j : jobs)
+    if (j.candidate) pairs.emplace_back(j.query, j.candidate->key);
+  const std::vector<LoopClosureResult> results = verifyPairs(pairs);
+  std::size_t next = 0;
+  for (const LoopJob& j : jobs) {
+    if (!j.candidate) {
+      if (attempt_hook_) attempt_hook_(LoopAttempt{j.query, std::nullopt, false, LoopStatus::kBadInput, "", 0, 0});
+      continue;
+    }
+    const LoopClosureResult& r = results[next++];
     ++stats->loops_attempted;
-    LoopClosureResult r;
-    std::optional<LoopEdge> e = closeLoop(key, c.key, &r);
     if (attempt_hook_)
-      attempt_hook_(LoopAttempt{key, c, spatial, r.status, r.reason, r.num_matches, r.num_inliers});
-    if (!e) return;
+      attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, r.status, r.reason, r.num_matches, r.num_inliers});
+    std::optional<LoopEdge> e = loopEdge(j.query, j.candidate->key, r);
+    if (!e) continue;
     ++stats->loops_geometric;
     e->id = next_loop_id_++;
     map_.loops.push_back(*e);
-  };
-  for (const PlaceCandidate& c : places.candidates) {
-    if (static_cast<int>(tried.size()) >= params_.max_candidates_per_keyframe) break;
-    if (!map_.keyframe(c.key) || c.key == key) continue;
-    attempt(c, false);
-  }
-  for (const KeyframeKey& k : spatialCandidates(key, q->keyframe.stamp, tried)) {
-    PlaceCandidate c;
-    c.key = k;
-    attempt(c, true);
   }
 }
 
@@ -297,14 +335,24 @@ void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, Merge
       if (ext.count(KeyframeKey{key.agent, key.session, n->id})) return true;
     return false;
   };
-  for (LoopEdge& loop : map_.loops) {
-    if (!inRig(loop.a) && !inRig(loop.b)) continue;
+  std::vector<std::size_t> again;
+  std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
+  for (std::size_t i = 0; i < map_.loops.size(); ++i)
+    if (inRig(map_.loops[i].a) || inRig(map_.loops[i].b)) {
+      again.push_back(i);
+      pairs.emplace_back(map_.loops[i].a, map_.loops[i].b);
+    }
+  const std::vector<LoopClosureResult> results = verifyPairs(pairs);
+  for (std::size_t k = 0; k < again.size(); ++k) {
+    LoopEdge& loop = map_.loops[again[k]];
     ++stats->loops_reverified;
-    std::optional<LoopEdge> e = closeLoop(loop.a, loop.b);
+    std::optional<LoopEdge> e = loopEdge(loop.a, loop.b, results[k]);
     if (!e || e->inliers < loop.inliers) continue;  // keep the earlier measurement
     e->id = loop.id;
     e->accepted = loop.accepted;
     loop = *e;
+    touched_.insert(loop.a);
+    touched_.insert(loop.b);
     pcm_cache_.forget(loop.id);
     ++stats->loops_replaced;
   }
@@ -327,7 +375,11 @@ void MapManager::runPcm() {
   }
   const PcmResult r = selectConsistentLoops(candidates, chain_.query(), params_.pcm, &pcm_cache_);
   std::set<std::uint64_t> accepted(r.accepted.begin(), r.accepted.end());
-  for (LoopEdge& e : map_.loops) e.accepted = accepted.count(e.id) > 0;
+  for (LoopEdge& e : map_.loops) {
+    const bool now = accepted.count(e.id) > 0;
+    if (now != e.accepted) touched_.insert(e.a), touched_.insert(e.b);
+    e.accepted = now;
+  }
   if (accepted != accepted_) graph_dirty_ = true;
   accepted_ = std::move(accepted);
 }
@@ -335,7 +387,10 @@ void MapManager::runPcm() {
 void MapManager::anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A) {
   t->anchored = true;
   t->T_W_A = T_W_A;
-  for (auto& [id, kf] : t->keyframes) kf.T_W_C = T_W_A * kf.keyframe.T_A_C;
+  for (auto& [id, kf] : t->keyframes) {
+    kf.T_W_C = T_W_A * kf.keyframe.T_A_C;
+    touched_.insert(keyOf(*t, id));
+  }
   const AgentStats* s = bookkeeper_ ? bookkeeper_->stats(t->agent) : nullptr;
   if (s && s->current_session == t->session && bookkeeper_->worldAgent() != t->agent)
     (void)bookkeeper_->markAnchored(t->agent, T_W_A);
@@ -430,20 +485,37 @@ Status MapManager::writePoseGraph(const std::string& path) const {
   return writePoseGraphG2o(*graph, path);
 }
 
-Status MapManager::optimize() {
+Status MapManager::optimize(bool full) {
   const auto world = world_traj_ ? map_.trajectories.find(*world_traj_) : map_.trajectories.end();
   if (world == map_.trajectories.end() || world->second.keyframes.empty()) return Status::Ok();  // nothing anchored yet
   Expected<PoseGraph> built = buildPoseGraph();
   if (!built) return Error{"pose graph: " + built.error()};
   PoseGraph& graph = *built;
+  const PoseGraphParams& pg = params_.pose_graph;
+  const bool incremental = !full && pg.incremental_hops > 0 && graph_diag_.solves > 0 &&
+                           incremental_since_full_ < pg.full_every;
+  if (incremental &&
+      graph.holdBeyond(std::vector<KeyframeKey>(touched_.begin(), touched_.end()), pg.incremental_hops) == 0) {
+    touched_.clear();  // nothing in the graph changed
+    graph_dirty_ = false;
+    merges_since_optimize_ = 0;
+    return Status::Ok();
+  }
   auto t0 = Clock::now();
   auto r = graph.optimize();
+  timings_.add(incremental ? "pose_graph_incremental" : "pose_graph_full", msSince(t0));
   timings_.add("pose_graph", msSince(t0));
   if (!r) return Error{"pose graph: " + r.error()};
   graph_diag_.result = *r;
   graph_diag_.edges = graph.residuals();
   ++graph_diag_.solves;
   if (!r->converged) ++graph_diag_.not_converged;
+  graph_diag_.incremental += incremental;
+  graph_diag_.last_incremental = incremental;
+  graph_diag_.last_free_nodes = graph.numFree();
+  graph_diag_.last_nodes = graph.numNodes();
+  incremental_since_full_ = incremental ? incremental_since_full_ + 1 : 0;
+  touched_.clear();
   for (auto& [tid, t] : map_.trajectories) {
     if (!t.anchored) continue;
     for (auto& [id, kf] : t.keyframes) {
@@ -471,7 +543,7 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
   stats.landmarks = static_cast<int>(submap.landmarks.size());
   const std::size_t loops_before = map_.loops.size();
   extendKeyframes(extended, &stats);
-  for (const KeyframeKey& key : added) detectLoops(key, &stats);
+  detectLoops(added, &stats);
   if (stats.loops_replaced > 0) graph_dirty_ = true;  // a loop's measurement changed
   if (map_.loops.size() != loops_before || stats.loops_replaced > 0) {
     t0 = Clock::now();

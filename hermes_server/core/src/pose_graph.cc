@@ -26,7 +26,9 @@ Status PoseGraphParams::read(const Config& config, const std::string& prefix) {
                    config.get(p + "anneal_factor", &anneal_factor),
                    config.get(p + "max_iterations", &max_iterations),
                    config.get(p + "function_tolerance", &function_tolerance),
-                   config.get(p + "num_threads", &num_threads)}) {
+                   config.get(p + "num_threads", &num_threads),
+                   config.get(p + "incremental_hops", &incremental_hops),
+                   config.get(p + "full_every", &full_every)}) {
     if (!s) return s;
   }
   if (Status s = validate(); !s) return Error{prefix + ": " + s.error()};
@@ -50,6 +52,8 @@ void PoseGraphParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(p + "max_iterations", max_iterations);
   w->set(p + "function_tolerance", function_tolerance);
   w->set(p + "num_threads", num_threads);
+  w->set(p + "incremental_hops", incremental_hops);
+  w->set(p + "full_every", full_every);
 }
 
 Status PoseGraphParams::validate() const {
@@ -74,6 +78,8 @@ Status PoseGraphParams::validate() const {
   if (max_iterations < 1) return Error{"max_iterations must be >= 1"};
   if (!(function_tolerance > 0)) return Error{"function_tolerance must be > 0"};
   if (num_threads < 1) return Error{"num_threads must be >= 1"};
+  if (incremental_hops < 0) return Error{"incremental_hops must be >= 0"};
+  if (full_every < 1) return Error{"full_every must be >= 1"};
   return Status::Ok();
 }
 
@@ -174,6 +180,41 @@ Status PoseGraph::fixFirstPoseOf(std::uint32_t agent) {
   return Error{"pose graph: agent " + std::to_string(agent) + " has no nodes to fix"};
 }
 
+std::size_t PoseGraph::holdBeyond(const std::vector<KeyframeKey>& seeds, int hops) {
+  std::map<KeyframeKey, std::vector<KeyframeKey>> adjacent;
+  for (const std::vector<Edge>* edges : {&odometry_, &loops_})
+    for (const Edge& e : *edges) {
+      adjacent[e.a].push_back(e.b);
+      adjacent[e.b].push_back(e.a);
+    }
+  // Breadth-first from the seeds, `hops` layers deep.
+  std::map<KeyframeKey, int> depth;
+  std::vector<KeyframeKey> layer;
+  for (const KeyframeKey& k : seeds)
+    if (nodes_.count(k) && depth.emplace(k, 0).second) layer.push_back(k);
+  for (int d = 1; d <= hops && !layer.empty(); ++d) {
+    std::vector<KeyframeKey> next;
+    for (const KeyframeKey& k : layer)
+      for (const KeyframeKey& n : adjacent[k])
+        if (depth.emplace(n, d).second) next.push_back(n);
+    layer = std::move(next);
+  }
+  for (auto& [key, node] : nodes_) node.held = !depth.count(key);
+  return numFree();
+}
+
+std::size_t PoseGraph::numFree() const {
+  std::size_t n = 0;
+  for (const auto& [key, node] : nodes_) n += !node.fixed && !node.held;
+  return n;
+}
+
+bool PoseGraph::active(const Edge& e) const {
+  const Node& a = nodes_.at(e.a);
+  const Node& b = nodes_.at(e.b);
+  return !(a.fixed || a.held) || !(b.fixed || b.held);
+}
+
 Expected<PoseGraphResult> PoseGraph::optimize() {
   if (Status s = params_.validate(); !s) return Error{"pose graph: " + s.error()};
   if (odometry_.empty() && loops_.empty()) return Error{"pose graph: no edges to optimise"};
@@ -239,7 +280,7 @@ bool PoseGraph::reweightOdometry() {
                                                                               : std::max(window[i], whole[i]);
     const double scale = std::clamp(level / typical, 1.0, params_.odometry_reweight_max);
     double& current = odometry_scale_[i];
-    if (std::abs(scale - current) > 0.1 * current) changed = true;
+    if (std::abs(scale - current) > 0.1 * current && active(odometry_[i])) changed = true;
     current = scale;
   }
   // Loops whose rigs stand on re-weighted odometry (see loop_rig_edges).
@@ -259,7 +300,7 @@ bool PoseGraph::reweightOdometry() {
   };
   for (std::size_t i = 0; i < loops_.size(); ++i) {
     const double scale = std::max(rigScale(loops_[i].a), rigScale(loops_[i].b));
-    if (std::abs(scale - loop_scale_[i]) > 0.1 * loop_scale_[i]) changed = true;
+    if (std::abs(scale - loop_scale_[i]) > 0.1 * loop_scale_[i] && active(loops_[i])) changed = true;
     loop_scale_[i] = scale;
   }
   return changed;
@@ -306,12 +347,16 @@ Expected<PoseGraphResult> PoseGraph::solve(bool anneal) {
   };
   ceres::LossFunctionWrapper* odometry_loss = makeWrapper(params_.odometry_loss, params_.odometry_loss_scale);
   ceres::LossFunctionWrapper* loop_loss = makeWrapper(params_.loop_loss, params_.loop_loss_scale);
-  for (std::size_t i = 0; i < odometry_.size(); ++i) addResidual(odometry_[i], odometry_scale_[i], odometry_loss);
-  for (std::size_t i = 0; i < loops_.size(); ++i) addResidual(loops_[i], loop_scale_[i], loop_loss);
+  // Edges between held (or fixed) nodes are constants of the problem: left out.
+  std::size_t odometry_added = 0, loops_added = 0;
+  for (std::size_t i = 0; i < odometry_.size(); ++i)
+    if (active(odometry_[i])) addResidual(odometry_[i], odometry_scale_[i], odometry_loss), ++odometry_added;
+  for (std::size_t i = 0; i < loops_.size(); ++i)
+    if (active(loops_[i])) addResidual(loops_[i], loop_scale_[i], loop_loss), ++loops_added;
 
   bool any_fixed = false;
   for (auto& [key, node] : nodes_) {
-    if (node.fixed && problem.HasParameterBlock(node.q.data())) {
+    if ((node.fixed || node.held) && problem.HasParameterBlock(node.q.data())) {
       problem.SetParameterBlockConstant(node.q.data());
       problem.SetParameterBlockConstant(node.t.data());
       any_fixed = true;
@@ -352,8 +397,8 @@ Expected<PoseGraphResult> PoseGraph::solve(bool anneal) {
     if (!summary.IsSolutionUsable()) break;
   }
   // A wrapper never handed to the problem is ours to delete.
-  if (odometry_.empty()) delete odometry_loss;
-  if (loops_.empty()) delete loop_loss;
+  if (odometry_added == 0) delete odometry_loss;
+  if (loops_added == 0) delete loop_loss;
 
   for (auto& [key, node] : nodes_) {  // keep quaternions normalised for readers
     Eigen::Map<Eigen::Vector4d> q(node.q.data());

@@ -55,6 +55,12 @@ struct MapManagerParams {
   /// edge was sent, get the model's information for their relative pose.
   OdometryNoiseParams odometry;
   int min_world_loops = 3;             ///< accepted loops needed to anchor an agent
+  /// Threads verifying the loops of one merge (17-point closures of every new
+  /// keyframe's candidates, and loops closed again after keyframe extensions):
+  /// the candidates are chosen first, verified side by side, and taken in the
+  /// order chosen, so the loops (and their ids) are the same for any count.
+  /// 1 = in the merging thread (synchronous).
+  int loop_threads = 2;
 
   MapManagerParams() { pcm.min_clique_size = 3; }
   Status read(const Config& config, const std::string& prefix = "server.");
@@ -80,6 +86,9 @@ struct GraphDiagnostics {
   std::vector<EdgeResidual> edges;
   int solves = 0;          ///< solves so far
   int not_converged = 0;   ///< of those, ended without a convergence criterion
+  int incremental = 0;     ///< of those, incremental (pose_graph.incremental_hops)
+  bool last_incremental = false;
+  std::size_t last_free_nodes = 0, last_nodes = 0;  ///< the last solve's free / all nodes
 };
 
 /// One loop-closure attempt (diagnostics): a new keyframe's place query and,
@@ -110,8 +119,11 @@ class MapManager {
   Expected<MergeStats> merge(RobotId robot, const Submap& submap,
                              const std::function<double(RobotId)>& credibility = nullptr);
 
-  /// Optimises the pose graph of the anchored trajectories now.
-  Status optimize();
+  /// Optimises the pose graph of the anchored trajectories now: incrementally
+  /// (only around what changed since the last solve, pose_graph.incremental_hops)
+  /// unless `full`, incremental_hops is 0, no solve was done yet or full_every
+  /// incremental solves were.
+  Status optimize(bool full = false);
   /// The pose graph optimize() would solve, at the current poses.
   Expected<PoseGraph> buildPoseGraph() const;
   /// Writes that graph as g2o text (pose_graph_io.h).
@@ -145,15 +157,28 @@ class MapManager {
   /// extensions append their keypoints to stored keyframes (`extended`).
   void storeSubmap(RobotId robot, const Submap& submap, std::vector<KeyframeKey>* added,
                    std::vector<KeyframeKey>* extended, MergeStats* stats);
-  /// Place recognition + loop closure for a newly stored keyframe.
-  void detectLoops(const KeyframeKey& key, MergeStats* stats);
-  /// The 17-point loop between two stored keyframes' rigs (no id yet), if verified.
+  /// One loop to verify: a new keyframe and one of its candidates; without a
+  /// candidate, the keyframe's report that place recognition found none.
+  struct LoopJob {
+    KeyframeKey query;
+    std::optional<PlaceCandidate> candidate;
+    bool spatial = false;
+  };
+  /// Place recognition for the newly stored keyframes (in order), then loop
+  /// closure of all their candidates on loop_threads threads.
+  void detectLoops(const std::vector<KeyframeKey>& added, MergeStats* stats);
+  /// The 17-point verification of each (query, candidate) pair, side by side
+  /// (loop_threads); results in the pairs' order, timings recorded.
+  std::vector<LoopClosureResult> verifyPairs(const std::vector<std::pair<KeyframeKey, KeyframeKey>>& pairs);
+  /// The rigs of two stored keyframes verified (thread-safe: reads the map only).
+  LoopClosureResult verifyPair(const KeyframeKey& query, const KeyframeKey& candidate) const;
+  /// The loop edge (no id yet) of a verified pair; the loop hook applies.
+  std::optional<LoopEdge> loopEdge(const KeyframeKey& query, const KeyframeKey& candidate,
+                                   const LoopClosureResult& r) const;
   /// Stored keyframes near `key`'s estimated world pose to try as loop
   /// candidates (spatial_candidates; `tried` are the place candidates).
   std::vector<KeyframeKey> spatialCandidates(const KeyframeKey& key, double stamp,
                                              const std::vector<KeyframeKey>& tried) const;
-  std::optional<LoopEdge> closeLoop(const KeyframeKey& query, const KeyframeKey& candidate,
-                                    LoopClosureResult* result = nullptr);
   /// After keyframe extensions: their BoW entries are renewed and every loop
   /// whose rig holds one is closed again; the new measurement replaces the old
   /// one (same id, PCM decides again) unless it has fewer inliers.
@@ -180,6 +205,10 @@ class MapManager {
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;
   std::set<std::uint64_t> accepted_;
+  /// Graph nodes changed since the last solve: new keyframes, ends of loops
+  /// accepted / dropped / re-measured, keyframes of newly anchored robots.
+  std::set<KeyframeKey> touched_;
+  int incremental_since_full_ = 0;
   std::optional<TrajectoryId> world_traj_;
   CandidateHook candidate_hook_;
   LoopHook loop_hook_;

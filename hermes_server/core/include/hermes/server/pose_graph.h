@@ -67,6 +67,14 @@ struct PoseGraphParams {
   int max_iterations = 100;
   double function_tolerance = 1e-8;
   int num_threads = 1;
+  /// Incremental solves (the server's MapManager): after a first full solve,
+  /// only the nodes within this many edges (odometry or loop) of what changed
+  /// (new keyframes, loops accepted or dropped, robots anchored) are free, the
+  /// rest held at their last solution; 0 = every solve full.
+  int incremental_hops = 8;
+  /// A full solve after this many incremental ones (what the held parts would
+  /// still gain from the changes reaches them there).
+  int full_every = 5;
 
   Status read(const Config& config, const std::string& prefix);
   void write(ConfigWriter* writer, const std::string& prefix) const;
@@ -162,6 +170,13 @@ class PoseGraph {
   Status setFixed(const KeyframeKey& key);
   /// Holds the first (smallest key) node of `agent` constant.
   Status fixFirstPoseOf(std::uint32_t agent);
+  /// For an incremental solve: holds constant every node more than `hops`
+  /// edges (odometry or loop) from all `seeds` (keys not in the graph are
+  /// ignored); edges between two held (or fixed) nodes leave the problem.
+  /// Returns how many nodes stay free. Call after adding every edge.
+  std::size_t holdBeyond(const std::vector<KeyframeKey>& seeds, int hops);
+  /// Nodes the solve may move (not fixed, not held).
+  std::size_t numFree() const;
 
   /// Optimises all nodes connected by edges. Without any fixed node the
   /// smallest key is fixed. Errors name an unusable problem (no edges).
@@ -191,6 +206,7 @@ class PoseGraph {
     std::array<double, 4> q;  // x y z w
     std::array<double, 3> t;
     bool fixed = false;
+    bool held = false;  ///< constant in an incremental solve (holdBeyond)
   };
   struct Edge {
     KeyframeKey a, b;
@@ -198,6 +214,8 @@ class PoseGraph {
     Mat6 sqrt_information;
   };
   bool robust() const;  ///< some edge kind has a robust loss (annealing applies)
+  /// The edge is in the problem: some end may move.
+  bool active(const Edge& e) const;
   /// One solve (annealed robust losses when `anneal`) at the current odometry scales.
   Expected<PoseGraphResult> solve(bool anneal);
   /// Sets odometry_scale_ from the residuals; true when some scale changed by > 10 %.
