@@ -175,8 +175,15 @@ LoopClosureResult solveGeneralizedRelativePose(const GeneralizedCorrespondences&
   if (params.refine && params.opengv_refine && static_cast<int>(inliers.size()) >= 18) {
     adapter.sett12(model.col(3));
     adapter.setR12(model.block<3, 3>(0, 0));
+    // On at most refine_max_points evenly spaced inliers (as the bundle adjustment).
+    std::vector<int> subset = inliers;
+    const std::size_t cap = static_cast<std::size_t>(params.refine_max_points);
+    if (cap > 0 && inliers.size() > cap) {
+      subset.resize(cap);
+      for (std::size_t j = 0; j < cap; ++j) subset[j] = inliers[j * inliers.size() / cap];
+    }
     const opengv::transformation_t refined =
-        opengv::relative_pose::optimize_nonlinear(adapter, inliers);
+        opengv::relative_pose::optimize_nonlinear(adapter, subset);
     if (refined.allFinite()) {
       std::vector<int> refined_inliers;
       problem->selectWithinDistance(refined, threshold, refined_inliers);

@@ -135,6 +135,80 @@ Vec6 residuals(const Terms& c, const SE3& T, const Vec3& p) {
   return r;
 }
 
+/// A few Gauss-Newton steps on one point with the pose held (numeric
+/// Jacobian); left where it was when a residual is invalid or a step fails.
+void refinePoint(const Terms& c, const SE3& T, Vec3* p) {
+  const double h = 1e-6;
+  for (int it = 0; it < 3; ++it) {
+    const Vec6 r = residuals(c, T, *p);
+    if (!(r.cwiseAbs().maxCoeff() < 1e5)) return;
+    Eigen::Matrix<double, 6, 3> J;
+    for (int j = 0; j < 3; ++j) {
+      Vec3 d = Vec3::Zero();
+      d(j) = h;
+      J.col(j) = (residuals(c, T, *p + d) - residuals(c, T, *p - d)) / (2 * h);
+    }
+    const Mat3 H = J.transpose() * J;
+    const Vec3 step = H.ldlt().solve(-J.transpose() * r);
+    if (!step.allFinite()) return;
+    const Vec3 next = *p + step;
+    if (!(residuals(c, T, next).squaredNorm() < r.squaredNorm())) return;
+    *p = next;
+    if (step.norm() < 1e-9 * (1 + p->norm())) return;
+  }
+}
+
+/// Robust cost of the pose-dependent residuals (candidate pixel and depth
+/// rows) of every point at pose T, Huber as in the bundle adjustment.
+double poseCost(const std::vector<Terms>& terms, const std::vector<Vec3>& points, const SE3& T, double huber) {
+  auto rho = [huber](double s) { return s <= huber * huber ? s : 2 * huber * std::sqrt(s) - huber * huber; };
+  double cost = 0;
+  for (std::size_t k = 0; k < terms.size(); ++k) {
+    const Vec6 r = residuals(terms[k], T, points[k]);
+    if (!(r.cwiseAbs().maxCoeff() < 1e5)) continue;
+    cost += rho(r.segment<2>(2).squaredNorm()) + rho(r(5) * r(5));
+  }
+  return cost;
+}
+
+/// Gauss-Newton steps on the pose alone over every point (held; numeric
+/// Jacobian, Huber weights): the pose of a bundle adjustment that saw a
+/// subset, brought to all the inliers.
+SE3 refinePose(const std::vector<Terms>& terms, const std::vector<Vec3>& points, SE3 T, double huber) {
+  const double h = 1e-6;
+  double cost = poseCost(terms, points, T, huber);
+  for (int it = 0; it < 3; ++it) {
+    Mat6 H = Mat6::Zero();
+    Vec6 g = Vec6::Zero();
+    for (std::size_t k = 0; k < terms.size(); ++k) {
+      const Vec6 r = residuals(terms[k], T, points[k]);
+      if (!(r.cwiseAbs().maxCoeff() < 1e5)) continue;
+      Eigen::Matrix<double, 6, 6> J;
+      for (int j = 0; j < 6; ++j) {
+        Vec6 xi = Vec6::Zero();
+        xi(j) = h;
+        J.col(j) = (residuals(terms[k], T * SE3::exp(xi), points[k]) -
+                    residuals(terms[k], T * SE3::exp(-xi), points[k])) / (2 * h);
+      }
+      Vec6 w = Vec6::Zero();  // rows that depend on the pose, Huber-weighted per block
+      const double nc = r.segment<2>(2).norm(), nd = std::abs(r(5));
+      w(2) = w(3) = nc <= huber ? 1.0 : huber / nc;
+      w(5) = nd <= huber ? 1.0 : huber / nd;
+      H += J.transpose() * w.asDiagonal() * J;
+      g += J.transpose() * w.asDiagonal() * r;
+    }
+    const Vec6 step = H.ldlt().solve(-g);
+    if (!step.allFinite()) break;
+    const SE3 next = T * SE3::exp(step);
+    const double c = poseCost(terms, points, next, huber);
+    if (!(c < cost)) break;
+    T = next;
+    cost = c;
+    if (step.norm() < 1e-10) break;
+  }
+  return T;
+}
+
 }  // namespace
 
 Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
@@ -165,6 +239,16 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
     terms.push_back(c);
   }
 
+  // The bundle adjustment sees an evenly spaced subset of at most
+  // refine_max_points inliers (its cost grows with the points; a rig pair
+  // holds ~1000); the others are triangulated again at its pose below.
+  std::vector<bool> in_ba(ids.size(), true);
+  const std::size_t cap = params.refine_max_points > 0 ? static_cast<std::size_t>(params.refine_max_points) : ids.size();
+  if (ids.size() > cap) {
+    in_ba.assign(ids.size(), false);
+    for (std::size_t j = 0; j < cap; ++j) in_ba[j * ids.size() / cap] = true;
+  }
+  bool refined = false;
   if (params.refine && ids.size() >= 18) {
     ceres::Problem::Options popt;
     popt.manifold_ownership = ceres::TAKE_OWNERSHIP;
@@ -173,6 +257,7 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
     problem.AddParameterBlock(t.data(), 3);
     const double huber = params.ransac_threshold_px;
     for (std::size_t k = 0; k < ids.size(); ++k) {
+      if (!in_ba[k]) continue;
       const Terms& c = terms[k];
       double* pk = points[k].data();
       problem.AddResidualBlock(c.rq.cost(), new ceres::HuberLoss(huber), pk);
@@ -193,9 +278,19 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
       q = T0.quat().coeffs();
       t = T0.translation();
       for (std::size_t k = 0; k < ids.size(); ++k) triangulate(corr, ids[k], T0, &points[k]);
+    } else {
+      refined = true;
     }
   }
-  const SE3 T(Quat(q(3), q(0), q(1), q(2)), t);
+  SE3 T(Quat(q(3), q(0), q(1), q(2)), t);
+  if (refined && ids.size() > cap) {
+    // The points left out of the bundle adjustment, best given its pose; then
+    // the pose given every point, and every point given that pose.
+    for (std::size_t k = 0; k < ids.size(); ++k)
+      if (!in_ba[k] && triangulate(corr, ids[k], T, &points[k])) refinePoint(terms[k], T, &points[k]);
+    T = refinePose(terms, points, T, params.ransac_threshold_px);
+    for (std::size_t k = 0; k < ids.size(); ++k) refinePoint(terms[k], T, &points[k]);
+  }
   out.T_refQ_refC = T;
 
   // Inliers by reprojection error in both views; information by Schur complement.

@@ -213,6 +213,13 @@ std::vector<LoopClosureResult> MapManager::verifyPairs(
   });
   if (!pairs.empty()) timings_.add("loop_batch", msSince(t0));
   for (double m : ms) timings_.add("loop_closure", m);
+  for (const LoopClosureResult& r : results) {  // where a closure's time goes
+    if (r.time_ms <= 0) continue;
+    timings_.add("loop_matching", r.time_ms - r.prefilter_ms - r.ransac_ms - r.refine_ms);
+    timings_.add("loop_prefilter", r.prefilter_ms);
+    timings_.add("loop_ransac", r.ransac_ms);
+    timings_.add("loop_refine", r.refine_ms);
+  }
   return results;
 }
 
