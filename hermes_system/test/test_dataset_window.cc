@@ -1,0 +1,81 @@
+// Time windows of a EuRoC folder (the swarm sweep's robots): rows kept by
+// stamp relative to cam0's first, everything else linked, errors named.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <unistd.h>
+
+#include "hermes/system/dataset_window.h"
+
+namespace fs = std::filesystem;
+
+namespace hermes::system {
+namespace {
+
+/// A EuRoC-shaped folder: cam0/cam1 with 100 rows at 10 Hz from t0, a sensor.yaml
+/// each, a ground-truth folder.
+fs::path makeSource(const fs::path& root) {
+  const fs::path mav0 = root / "src" / "mav0";
+  for (const char* cam : {"cam0", "cam1"}) {
+    fs::create_directories(mav0 / cam / "data");
+    std::ofstream(mav0 / cam / "sensor.yaml") << "sensor_type: camera\n";
+    std::ofstream csv(mav0 / cam / "data.csv");
+    csv << "#timestamp [ns],filename\n";
+    for (int i = 0; i < 100; ++i) {
+      const long long ns = 1403636580000000000LL + 100000000LL * i;
+      csv << ns << ',' << ns << ".png\n";
+    }
+  }
+  fs::create_directories(mav0 / "state_groundtruth_estimate0");
+  std::ofstream(mav0 / "state_groundtruth_estimate0" / "data.csv") << "#t\n";
+  return root / "src";
+}
+
+int rows(const fs::path& csv) {
+  std::ifstream f(csv);
+  int n = 0;
+  for (std::string line; std::getline(f, line);) n += !line.empty() && line[0] != '#';
+  return n;
+}
+
+TEST(DatasetWindow, KeepsTheWindowsRowsAndLinksTheRest) {
+  const fs::path root = fs::temp_directory_path() / ("hermes_window_" + std::to_string(::getpid()));
+  fs::remove_all(root);
+  const fs::path src = makeSource(root);
+  auto w = writeEurocWindow(src.string(), 2.0, 3.0, (root / "view").string());
+  ASSERT_TRUE(w.ok()) << w.error();
+  EXPECT_EQ(w->frames, 30u);  // t = 2.0 .. 4.9 s
+  EXPECT_NEAR(w->first_stamp_s, 1403636582.0, 1e-6);
+  const fs::path mav0 = root / "view" / "mav0";
+  EXPECT_EQ(rows(mav0 / "cam0" / "data.csv"), 30);
+  EXPECT_EQ(rows(mav0 / "cam1" / "data.csv"), 30);
+  EXPECT_TRUE(fs::is_symlink(mav0 / "cam0" / "data"));
+  EXPECT_TRUE(fs::is_symlink(mav0 / "cam1" / "sensor.yaml"));
+  EXPECT_TRUE(fs::is_symlink(mav0 / "state_groundtruth_estimate0"));
+  // Written again over an existing view.
+  w = writeEurocWindow(src.string(), 0.0, 1.0, (root / "view").string());
+  ASSERT_TRUE(w.ok()) << w.error();
+  EXPECT_EQ(rows(mav0 / "cam0" / "data.csv"), 10);
+  fs::remove_all(root);
+}
+
+TEST(DatasetWindow, ErrorsNameTheProblem) {
+  const fs::path root = fs::temp_directory_path() / ("hermes_window_bad_" + std::to_string(::getpid()));
+  fs::remove_all(root);
+  const fs::path src = makeSource(root);
+  auto empty = writeEurocWindow(src.string(), 50.0, 5.0, (root / "view").string());
+  ASSERT_FALSE(empty.ok());
+  EXPECT_NE(empty.error().find("no frame"), std::string::npos) << empty.error();
+  auto missing = writeEurocWindow((root / "nothing").string(), 0.0, 5.0, (root / "view").string());
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.error().find("cam0/data.csv"), std::string::npos) << missing.error();
+  auto bad = writeEurocWindow(src.string(), 0.0, 0.0, (root / "view").string());
+  EXPECT_FALSE(bad.ok());
+  fs::remove_all(root);
+}
+
+}  // namespace
+}  // namespace hermes::system
