@@ -84,6 +84,29 @@ TEST(OfflineRun, ThreeRobotsMergeUnlimited) {
   EXPECT_EQ(back->agents_merged, r.metrics.agents_merged);
 }
 
+// A robot that stops after 2 s sends fewer keyframes than the world frame asks
+// for (server.bookkeeper.anchor_min_keyframes). It must not keep the others out of
+// the global map: once a loop ties two robots that qualify, the world is fixed
+// among them (before, nothing merged until every robot had qualified).
+TEST(OfflineRun, ARobotThatStopsEarlyDoesNotKeepTheOthersOutOfTheMap) {
+  system::SystemParams p = baseParams();
+  p.server.bookkeeper.anchor_wait_s = 1e6;  // the loop rule alone, not the wait
+  auto run = test_support::makeHallRun(p, "stops_early", {0, 0, 20});
+  ASSERT_TRUE(run);
+  ASSERT_TRUE(run->run());
+  const system::RunResults r = system::evaluateRun(*run);
+  std::printf("%s", system::formatReport(*run, r).c_str());
+  expectExactlyOnce(*run, r);
+  const AgentStats* small = run->server().bookkeeper().stats(*run->agents()[2].robot);
+  ASSERT_NE(small, nullptr);
+  EXPECT_LT(small->keyframes, static_cast<std::uint64_t>(p.server.bookkeeper.anchor_min_keyframes))
+      << "the short robot qualified: the test no longer covers the rule";
+  ASSERT_TRUE(r.metrics.agents_merged.has_value());
+  EXPECT_GE(*r.metrics.agents_merged, 2);
+  ASSERT_TRUE(r.metrics.ate_rmse_m.has_value());
+  EXPECT_LT(*r.metrics.ate_rmse_m, 0.06);
+}
+
 TEST(OfflineRun, LossAndOutageStillDeliverEveryWindowOnceAndRepeat) {
   const std::string trace = ::testing::TempDir() + "/hermes_offline_trace.csv";
   std::ofstream(trace) << "time_s,rate_mbitps,latency_ms,loss\n"

@@ -2,6 +2,7 @@
 #include "hermes/server/bookkeeper.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace hermes {
 
@@ -14,6 +15,7 @@ bool isNil(const Uuid& u) {
 Status BookkeeperParams::read(const Config& c, const std::string& p) {
   for (auto s : {c.get(p + "require_registration", &require_registration),
                  c.get(p + "anchor_min_keyframes", &anchor_min_keyframes),
+                 c.get(p + "anchor_wait_s", &anchor_wait_s),
                  c.get(p + "stale_after_s", &stale_after_s)})
     if (!s) return s;
   return validate();
@@ -22,6 +24,7 @@ Status BookkeeperParams::read(const Config& c, const std::string& p) {
 void BookkeeperParams::write(ConfigWriter& w, const std::string& p) const {
   w.set(p + "require_registration", require_registration);
   w.set(p + "anchor_min_keyframes", anchor_min_keyframes);
+  w.set(p + "anchor_wait_s", anchor_wait_s);
   w.set(p + "stale_after_s", stale_after_s);
 }
 
@@ -29,6 +32,8 @@ Status BookkeeperParams::validate() const {
   if (anchor_min_keyframes < 0)
     return Error{"server.bookkeeper.anchor_min_keyframes must be >= 0, got " +
                  std::to_string(anchor_min_keyframes)};
+  if (!std::isfinite(anchor_wait_s))
+    return Error{"server.bookkeeper.anchor_wait_s must be finite (< 0: wait for every agent)"};
   if (!(stale_after_s >= 0))
     return Error{"server.bookkeeper.stale_after_s must be >= 0, got " +
                  std::to_string(stale_after_s)};
@@ -203,14 +208,31 @@ Status Bookkeeper::markApplied(RobotId robot, std::uint32_t session, std::uint64
   return Status::Ok();
 }
 
-std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotId)>& credibility) {
+std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotId)>& credibility,
+                                               const std::function<bool(RobotId)>& tied) {
   if (world_) return world_;
-  if (agents_.empty()) return std::nullopt;
-  for (const AgentStats& a : agents_)
-    if (a.keyframes < static_cast<std::uint64_t>(params_.anchor_min_keyframes)) return std::nullopt;
-  RobotId best = 0;
-  double best_c = credibility ? credibility(0) : 0.0;
-  for (RobotId r = 1; r < agents_.size(); ++r) {
+  std::vector<RobotId> qualified;
+  double now = -1;
+  for (const AgentStats& a : agents_) {
+    now = std::max(now, a.last_time);
+    if (a.keyframes >= static_cast<std::uint64_t>(params_.anchor_min_keyframes)) qualified.push_back(a.robot);
+  }
+  if (qualified.empty()) return std::nullopt;
+  if (!first_qualified_s_) first_qualified_s_ = now;
+  std::vector<RobotId> candidates;
+  if (qualified.size() == agents_.size()) {
+    candidates = qualified;
+  } else {
+    if (tied)
+      for (RobotId r : qualified)
+        if (tied(r)) candidates.push_back(r);
+    if (candidates.empty() && params_.anchor_wait_s >= 0 && now - *first_qualified_s_ >= params_.anchor_wait_s)
+      candidates = qualified;
+  }
+  if (candidates.empty()) return std::nullopt;
+  RobotId best = candidates.front();
+  double best_c = credibility ? credibility(best) : 0.0;
+  for (RobotId r : candidates) {
     const double c = credibility ? credibility(r) : 0.0;
     if (c > best_c) {
       best_c = c;

@@ -407,7 +407,12 @@ void MapManager::anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A) {
 bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibility) {
   if (!bookkeeper_) return false;
   bool changed = false;
-  const auto world = bookkeeper_->selectWorld(credibility);
+  const auto tied = [this](RobotId r) {
+    for (const LoopEdge& e : map_.loops)
+      if (e.accepted && e.a.agent != e.b.agent && (e.a.agent == r || e.b.agent == r)) return true;
+    return false;
+  };
+  const auto world = bookkeeper_->selectWorld(credibility, tied);
   if (!world) return false;
   const AgentStats* ws = bookkeeper_->stats(*world);
   auto wt = map_.trajectories.find({*world, ws ? ws->current_session : 0});

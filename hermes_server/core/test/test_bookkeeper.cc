@@ -140,6 +140,58 @@ TEST(Bookkeeper, UnknownAgentsWhenRegistrationIsRequired) {
   EXPECT_FALSE(bad.validate().ok());
 }
 
+// One robot that stays small (stopped early, or a lean link) must not keep every
+// other robot out of the global map: a loop between qualified robots, or the wait,
+// fixes the world among the qualified ones; a negative wait keeps the old rule.
+TEST(Bookkeeper, ASmallRobotDoesNotBlockTheWorldFrame) {
+  const Uuid a = uuidFromSeed(20), b = uuidFromSeed(21), c = uuidFromSeed(22);
+  std::map<RobotId, double> cred = {{0, 0.4}, {1, 0.9}, {2, 2.0}};
+  auto credibility = [&](RobotId r) { return cred.at(r); };
+  auto feed = [&](Bookkeeper* bk, double t0) {  // a and b reach 12 keyframes, c stays at 3
+    for (std::uint64_t seq = 0; seq < 3; ++seq) {
+      bk->onArrival(arrival(a, 0, seq, 4), t0 + seq);
+      bk->onArrival(arrival(b, 0, seq, 4), t0 + seq);
+    }
+    bk->onArrival(arrival(c, 0, 0, 3), t0);
+  };
+  BookkeeperParams bp;
+  bp.anchor_min_keyframes = 10;
+  bp.anchor_wait_s = 30;
+  {  // a loop ties agent 0 to the small agent 2: agent 0 is the only tied qualified one
+    Bookkeeper bk(bp);
+    feed(&bk, 0);
+    EXPECT_FALSE(bk.selectWorld(credibility).has_value());
+    EXPECT_FALSE(bk.selectWorld(credibility, [](RobotId) { return false; }).has_value());
+    auto world = bk.selectWorld(credibility, [](RobotId r) { return r == 0 || r == 2; });
+    ASSERT_TRUE(world.has_value());
+    EXPECT_EQ(*world, 0u);  // c is more credible but has too few keyframes; b is not tied
+  }
+  {  // no loop: the wait runs from the first time a qualified agent was seen
+    Bookkeeper bk(bp);
+    feed(&bk, 0);
+    EXPECT_FALSE(bk.selectWorld(credibility).has_value());  // clock 2 s: starts the wait
+    bk.onArrival(arrival(a, 0, 3, 4), 31.0);
+    EXPECT_FALSE(bk.selectWorld(credibility).has_value());  // 29 s waited
+    bk.onArrival(arrival(a, 0, 4, 4), 32.5);
+    auto world = bk.selectWorld(credibility);
+    ASSERT_TRUE(world.has_value());
+    EXPECT_EQ(*world, 1u);  // the most credible qualified agent
+    EXPECT_FALSE(bk.anchored(2));
+  }
+  {  // a negative wait waits for every agent
+    BookkeeperParams strict = bp;
+    strict.anchor_wait_s = -1;
+    Bookkeeper bk(strict);
+    feed(&bk, 0);
+    bk.onArrival(arrival(a, 0, 3, 4), 500.0);
+    EXPECT_FALSE(bk.selectWorld(credibility).has_value());
+    bk.onArrival(arrival(c, 0, 1, 7), 501.0);
+    auto world = bk.selectWorld(credibility);
+    ASSERT_TRUE(world.has_value());
+    EXPECT_EQ(*world, 2u);
+  }
+}
+
 TEST(Bookkeeper, WorldFrameAfterThirtyKeyframesEachThenLoopsAnchorOthers) {
   BookkeeperParams bp;
   bp.anchor_min_keyframes = 30;

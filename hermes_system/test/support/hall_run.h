@@ -4,14 +4,17 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "hermes/system/offline_run.h"
 
 namespace hermes::test_support {
 
 /// Spools in <test temp dir>/hermes_offline_<tag>/spool. Null (with a gtest
-/// failure) when rendering or opening a dataset failed.
+/// failure) when rendering or opening a dataset failed. `max_frames[i]` (0 = all)
+/// cuts robot i's sequence short.
 std::unique_ptr<system::OfflineRun> makeHallRun(const system::SystemParams& params,
-                                                const std::string& tag);
+                                                const std::string& tag,
+                                                const std::vector<std::size_t>& max_frames = {});
 
 }  // namespace hermes::test_support

@@ -22,9 +22,13 @@
 //   rejected    unknown agent while registration is required, or a malformed
 //               header (e.g. nil uuid): do not acknowledge
 //
-// Global frame: once every registered agent has accepted >= anchor_min_keyframes
-// keyframes, selectWorld() makes the most credible agent's frame the world frame
-// (T_W_A = identity, anchored). Another agent is anchored by markAnchored(agent,
+// Global frame: selectWorld() makes the most credible agent's frame the world frame
+// (T_W_A = identity, anchored) among the agents that have accepted >=
+// anchor_min_keyframes keyframes ("qualified"), once (a) every known agent is
+// qualified, or (b) a verified loop ties a qualified agent to another agent (a map
+// can merge: a robot that stays small, or stopped early, no longer blocks everyone),
+// or (c) anchor_wait_s passed since the first agent qualified (the latest arrival
+// time is the clock; the wait restarts after a checkpoint restore). Another agent is anchored by markAnchored(agent,
 // T_W_A) when a verified loop ties it to an anchored agent.
 #pragma once
 
@@ -52,7 +56,8 @@ using RobotId = std::uint32_t;
 
 struct BookkeeperParams {
   bool require_registration = false;
-  int anchor_min_keyframes = 10;  ///< keyframes every agent must have sent before the world is fixed
+  int anchor_min_keyframes = 10;  ///< keyframes an agent must have sent to define the world
+  double anchor_wait_s = 30.0;    ///< after this since the first qualified, fix it anyway (< 0: wait for all)
   double stale_after_s = 60.0;    ///< grace for late submaps of a superseded session [s]
   Status read(const Config& config, const std::string& prefix = "server.bookkeeper.");
   void write(ConfigWriter& out, const std::string& prefix = "server.bookkeeper.") const;
@@ -139,10 +144,12 @@ class Bookkeeper {
     return KeyframeKey{robot, session, id};
   }
 
-  /// Fixes the world frame once every agent has enough keyframes: the agent with the
-  /// highest credibility (ties: lowest robot id) is anchored with T_W_A = identity.
+  /// Fixes the world frame by the rule above: the candidate with the highest
+  /// credibility (ties: lowest robot id) is anchored with T_W_A = identity. `tied(r)`
+  /// says whether a verified loop ties agent r to another agent (may be empty).
   /// Returns the world agent (also when it was fixed before), nullopt while waiting.
-  std::optional<RobotId> selectWorld(const std::function<double(RobotId)>& credibility);
+  std::optional<RobotId> selectWorld(const std::function<double(RobotId)>& credibility,
+                                     const std::function<bool(RobotId)>& tied = nullptr);
   /// Anchors (or re-anchors) an agent whose frame a verified loop tied to the world.
   Status markAnchored(RobotId robot, const SE3& T_W_A);
   std::optional<RobotId> worldAgent() const { return world_; }
@@ -170,6 +177,7 @@ class Bookkeeper {
   std::map<std::pair<RobotId, std::uint32_t>, SeqTracker> seqs_;
   std::set<std::tuple<RobotId, std::uint32_t, std::uint64_t>> applied_;
   std::optional<RobotId> world_;
+  std::optional<double> first_qualified_s_;  ///< arrival clock when an agent first qualified
 };
 
 }  // namespace hermes
