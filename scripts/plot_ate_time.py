@@ -8,8 +8,10 @@ CSV (written by hermes_run): header `time_s,agent,kind,error_m`; time_s [s] on t
 run's simulated clock (0 = the agent's first frame); kind `merged`: the position
 error of a merged keyframe under the run's one common alignment (solid line),
 `odometry`: the position error of the agent's own odometry aligned on its own
-(dashed line, same colour). Where the solid line is above the dashed one, the
-merge made that agent worse than its odometry. Exit code 2 with a one-line reason
+(dashed line, same colour), `global`: the robot's own idea of its place in the
+world at each frame (the server's latest world <- odom times its odometry), under
+the common alignment (dotted line). Where the solid line is above the dashed one,
+the merge made that agent worse than its odometry. Exit code 2 with a one-line reason
 on bad input.
 """
 import argparse
@@ -33,8 +35,8 @@ def main():
             for n, row in enumerate(rows, start=2):
                 if len(row) != 4:
                     raise ValueError(f"{a.csv}:{n}: expected 4 columns, got {len(row)}")
-                if row[2] not in ("merged", "odometry"):
-                    raise ValueError(f"{a.csv}:{n}: kind must be merged or odometry, got {row[2]}")
+                if row[2] not in ("merged", "odometry", "global"):
+                    raise ValueError(f"{a.csv}:{n}: kind must be merged, odometry or global, got {row[2]}")
                 t, name, e = float(row[0]), row[1], float(row[3])
                 series.setdefault(name, {}).setdefault(row[2], []).append((t, e))
     except (OSError, ValueError) as e:
@@ -46,7 +48,7 @@ def main():
     fig, ax = plt.subplots(figsize=(8, 4))
     for i, (name, kinds) in enumerate(sorted(series.items())):
         colour = f"C{i % 10}"
-        for kind, style in (("merged", "-"), ("odometry", "--")):
+        for kind, style in (("merged", "-"), ("odometry", "--"), ("global", ":")):
             pts = sorted(kinds.get(kind, []))
             if pts:
                 ax.plot([p[0] for p in pts], [100.0 * p[1] for p in pts], style, color=colour,

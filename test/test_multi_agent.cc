@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
+#include <hermes_msgs/GlobalPose.h>
 #include <hermes_msgs/SubmapAck.h>
 #include <nav_msgs/Odometry.h>
 #include <nav_msgs/Path.h>
@@ -65,6 +66,7 @@ struct Observed {
   std::map<std::string, hermes::Trajectory> odom;  ///< per robot, body poses (odometry frame)
   std::string status;
   std::map<std::string, nlohmann::json> uplink;  ///< per robot, its last uplink_status
+  std::map<std::string, hermes_msgs::GlobalPose> global;  ///< per uuid, the latest world <- odom
 };
 
 /// MQTT mode: the broker this test runs (kept for every test of the process) and
@@ -215,6 +217,11 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
         if (a->status == hermes_msgs::SubmapAck::REJECTED) ++o.rejected;
         o.uuid_of_robot[a->robot_id] = a->agent_uuid;
       }));
+  subs.push_back(nh.subscribe<hermes_msgs::GlobalPose>(
+      "/hermes/global_pose", 100, [&](const hermes_msgs::GlobalPoseConstPtr& g) {
+        std::lock_guard<std::mutex> l(o.mu);
+        o.global[g->agent_uuid] = *g;
+      }));
   subs.push_back(nh.subscribe<hermes_msgs::AgentHeartbeat>(
       "/hermes/heartbeat", 10, [&](const hermes_msgs::AgentHeartbeatConstPtr& h) {
         std::lock_guard<std::mutex> l(o.mu);
@@ -300,7 +307,7 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
     }
     const auto j = nlohmann::json::parse(o.status.empty() ? "{}" : o.status, nullptr, false);
     const bool merged = j.is_object() && j.value("agents_merged", 0) == 3;
-    finished = all_acked && merged && o.paths.size() == 3 &&
+    finished = all_acked && merged && o.paths.size() == 3 && (mqtt || o.global.size() == 3) &&
                ros::WallTime::now() - all_done > ros::WallDuration(5.0);
   }
   spinner.stop();
@@ -380,6 +387,29 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
   ASSERT_TRUE(ev.ok()) << ev.error();
   std::printf("merged ATE %.4f m over %zu keyframes\n", ev->merged_ate.trans_m.rmse, ev->matched);
   EXPECT_LT(ev->merged_ate.trans_m.rmse, 0.10);
+
+  // The server told each robot where its odometry frame sits in the world: its
+  // last odometry pose through that transform lands on its ground truth (under
+  // the merged map's alignment).
+  if (mqtt) return;
+  ASSERT_EQ(o.global.size(), 3u) << "not every robot got /hermes/global_pose";
+  for (const auto& [uuid, g] : o.global) {
+    const std::string name = o.name_of_uuid[uuid];
+    ASSERT_TRUE(kSequence.count(name) && !o.odom[name].empty()) << "global pose for '" << name << "'";
+    auto ds = hermes::Dataset::open(data + "/" + kSequence.at(name), hermes::DatasetParams{});
+    ASSERT_TRUE(ds.ok()) << ds.error();
+    const auto& tr = g.world_from_odom;
+    const hermes::SE3 T_W_O(hermes::Quat(tr.rotation.w, tr.rotation.x, tr.rotation.y, tr.rotation.z),
+                            hermes::Vec3(tr.translation.x, tr.translation.y, tr.translation.z));
+    const hermes::StampedPose last = o.odom[name].back();
+    hermes::SE3 T_gt;
+    ASSERT_TRUE(hermes::interpolatePose((*ds)->info().groundtruth, last.t, &T_gt)) << name;
+    const hermes::SE3 T_est = ev->merged_alignment.applyToPose(T_W_O * last.T_W_B);
+    const double err = (T_est.translation() - T_gt.translation()).norm();
+    std::printf("%s global pose at its last frame: %.4f m off (%llu merged keyframes)\n", name.c_str(), err,
+                static_cast<unsigned long long>(g.keyframes));
+    EXPECT_LT(err, 0.10) << name;
+  }
 }
 
 int main(int argc, char** argv) {

@@ -10,10 +10,15 @@
 //        ~camera and no ~dataset gives the calibration.
 //        done (std_msgs/Empty): end of the sequence, send the last partial window
 //        /hermes/submap_ack (acks for this agent's uuid)
+//        /hermes/global_pose (the server's world <- odom for this agent's uuid and
+//        session, after each merge; ROS transport)
 //   out: odom (nav_msgs/Odometry, frame <robot>/odom, child <robot>/base_link:
 //        the body frame of the calibration's T_B_C, i.e. the dataset's
 //        ground-truth frame (EuRoC: IMU body; TUM: colour camera); stamped with
 //        the image stamp), TF <robot>/odom -> <robot>/base_link,
+//        once the server placed the robot: odom_global (nav_msgs/Odometry, frame
+//        world, child <robot>/base_link: its odometry through the latest world <-
+//        odom) and TF world -> <robot>/odom, both with the image stamp,
 //        /hermes/submap, /hermes/heartbeat (1 Hz)
 //        uplink_status (std_msgs/String JSON, latched; after every new submap and at
 //        1 Hz): session, submaps created by this process, spool pending keys/bytes,
@@ -47,6 +52,7 @@
 // tried again with backoff; the spool keeps everything meanwhile.
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
+#include <hermes_msgs/GlobalPose.h>
 #include <hermes_msgs/SubmapAck.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
@@ -206,6 +212,7 @@ class AgentNodelet : public nodelet::Nodelet {
     topic_b_ = nh.resolveName(stereo ? "right/image" : "depth/image");
 
     odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 50);
+    odom_global_pub_ = nh.advertise<nav_msgs::Odometry>("odom_global", 50);
     uplink_status_pub_ = nh.advertise<std_msgs::String>("uplink_status", 20, true);
     if (mqtt_) {
       mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), &AgentNodelet::onMqtt, this);
@@ -213,6 +220,7 @@ class AgentNodelet : public nodelet::Nodelet {
       submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
       heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
       ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
+      global_sub_ = nh.subscribe("/hermes/global_pose", 20, &AgentNodelet::onGlobalPose, this);
     }
     done_sub_ = nh.subscribe("done", 1, &AgentNodelet::onDone, this);
     if (calibration_) {
@@ -458,6 +466,51 @@ class AgentNodelet : public nodelet::Nodelet {
     tf.transform.translation.z = odom.pose.pose.position.z;
     tf.transform.rotation = odom.pose.pose.orientation;
     tf_.sendTransform(tf);
+    publishGlobal(T_W_B, stamp);
+  }
+
+  /// odom_global and TF world -> <robot>/odom, once the server placed this robot.
+  void publishGlobal(const hermes::SE3& T_O_B, const ros::Time& stamp) {
+    const hermes::GlobalPoseState g = pipeline_->globalPose();
+    const auto T_world_B = g.inWorld(T_O_B);
+    if (!T_world_B) return;
+    nav_msgs::Odometry o;
+    o.header.stamp = stamp;
+    o.header.frame_id = "world";
+    o.child_frame_id = robot_ + "/base_link";
+    o.pose.pose = toPose(*T_world_B);
+    odom_global_pub_.publish(o);
+    geometry_msgs::TransformStamped tf;
+    tf.header.stamp = stamp;
+    tf.header.frame_id = "world";
+    tf.child_frame_id = robot_ + "/odom";
+    const geometry_msgs::Pose p = toPose(g.latest()->T_W_O);
+    tf.transform.translation.x = p.position.x;
+    tf.transform.translation.y = p.position.y;
+    tf.transform.translation.z = p.position.z;
+    tf.transform.rotation = p.orientation;
+    tf_.sendTransform(tf);
+  }
+
+  void onGlobalPose(const hermes_msgs::GlobalPoseConstPtr& m) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!pipeline_ || m->agent_uuid != uuid_) return;
+    hermes::GlobalPoseUpdate u;
+    u.session = m->session;
+    u.keyframe_stamp = m->keyframe_stamp;
+    u.keyframes = m->keyframes;
+    const auto& tr = m->world_from_odom;
+    u.T_W_O = hermes::SE3(hermes::Quat(tr.rotation.w, tr.rotation.x, tr.rotation.y, tr.rotation.z),
+                          hermes::Vec3(tr.translation.x, tr.translation.y, tr.translation.z));
+    if (hermes::Status s = u.validate(); !s) {
+      NODELET_WARN_THROTTLE(5.0, "Agent %s: /hermes/global_pose: %s", robot_.c_str(), s.error().c_str());
+      return;
+    }
+    if (pipeline_->onGlobalPose(u, ros::WallTime::now().toSec()) && !placed_) {
+      placed_ = true;
+      NODELET_INFO("Agent %s: placed in the global map (%llu merged keyframes)", robot_.c_str(),
+                   static_cast<unsigned long long>(u.keyframes));
+    }
   }
 
   void onAck(const hermes_msgs::SubmapAckConstPtr& a) {
@@ -633,7 +686,9 @@ class AgentNodelet : public nodelet::Nodelet {
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
   std::int64_t received_a_ = 0, received_b_ = 0, no_camera_ = 0, malformed_ = 0;
   std::int64_t tracked_ = 0, feed_errors_ = 0;
-  ros::Publisher odom_pub_, submap_pub_, heartbeat_pub_, uplink_status_pub_;
+  ros::Publisher odom_pub_, odom_global_pub_, submap_pub_, heartbeat_pub_, uplink_status_pub_;
+  ros::Subscriber global_sub_;
+  bool placed_ = false;  ///< the first world <- odom was taken (logged once)
   std::vector<std::pair<std::uint32_t, std::uint64_t>> created_, replayed_;
   bool done_ = false;
   ros::Subscriber ack_sub_, done_sub_, info_a_sub_, info_b_sub_, image_a_sub_, image_b_sub_;

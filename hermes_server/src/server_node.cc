@@ -3,12 +3,15 @@
 // graph). Topics (global):
 //   in : /hermes/submap (EncodedSubmap), /hermes/heartbeat (AgentHeartbeat)
 //   out: /hermes/submap_ack (SubmapAck, for every frame, rejections with reason)
+//        /hermes/global_pose (GlobalPose: after every merge, each anchored robot's
+//        world <- odom at its newest merged keyframe; the robot's nodelet turns
+//        it into TF world -> <robot>/odom and odom_global)
 //        /hermes/status (std_msgs/String, metrics JSON, 1 Hz)
 //        /hermes/path/<robot id> (nav_msgs/Path of merged keyframes, frame "world")
 //        /hermes/global_map (sensor_msgs/PointCloud2, frame "world", latched)
 //        /hermes/loops (visualization_msgs/Marker LINE_LIST of accepted loops)
-//        TF world -> <robot name>/odom (1 Hz) for every anchored agent (the name from
-//        its heartbeat, else agent_<id>); world itself is always published
+//        TF world -> hermes_origin (1 Hz), so the fixed frame exists; the robots'
+//        own nodelets publish world -> <robot>/odom from /hermes/global_pose
 // Threading: one spinner thread; acks are sent in the submap callback, merging
 // runs from a timer one submap per tick, so an ack waits at most one merge.
 // Params: ~config (YAML, default config/hermes.yaml of the source tree),
@@ -29,6 +32,7 @@
 // broker is reported and tried again with backoff.
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
+#include <hermes_msgs/GlobalPose.h>
 #include <hermes_msgs/SubmapAck.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
@@ -122,8 +126,12 @@ class ServerNode {
       submap_sub_ = nh.subscribe("/hermes/submap", 100, &ServerNode::onSubmap, this);
       hb_sub_ = nh.subscribe("/hermes/heartbeat", 10, &ServerNode::onHeartbeat, this);
     }
+    global_pub_ = nh.advertise<hermes_msgs::GlobalPose>("/hermes/global_pose", 100);
     process_timer_ = nh.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent&) {
-      if (server_->process(ros::WallTime::now().toSec(), 1) > 0) dirty_ = true;
+      if (server_->process(ros::WallTime::now().toSec(), 1) > 0) {
+        dirty_ = true;
+        publishGlobalPoses();
+      }
     });
     publish_timer_ = nh.createWallTimer(ros::WallDuration(1.0),
                                         [this](const ros::WallTimerEvent&) { publishOutputs(); });
@@ -192,34 +200,40 @@ class ServerNode {
       ROS_INFO("hermes_server: agent %s is '%s'", h->agent_uuid.c_str(), h->name.c_str());
   }
 
-  /// world -> <robot>/odom of the anchored agents' current sessions.
+  /// After a merge: every anchored robot's current session hears its world <- odom.
+  void publishGlobalPoses() {
+    const ros::Time now = ros::Time::now();
+    for (const auto& [robot, u] : hermes::server::globalPoseUpdates(server_->map())) {
+      const hermes::AgentStats* st = server_->bookkeeper().stats(robot);
+      if (!st || st->current_session != u.session) continue;
+      hermes_msgs::GlobalPose m;
+      m.header.stamp = now;
+      m.header.frame_id = "world";
+      m.agent_uuid = hermes::toString(st->uuid);
+      m.robot_id = robot;
+      m.session = u.session;
+      m.keyframe_stamp = u.keyframe_stamp;
+      m.keyframes = u.keyframes;
+      const geometry_msgs::Pose p = toPose(u.T_W_O);
+      m.world_from_odom.translation.x = p.position.x;
+      m.world_from_odom.translation.y = p.position.y;
+      m.world_from_odom.translation.z = p.position.z;
+      m.world_from_odom.rotation = p.orientation;
+      global_pub_.publish(m);
+    }
+  }
+
+  /// The fixed frame exists before any robot publishes its world -> odom.
   void publishFrames(const std_msgs::Header& h) {
-    std::vector<geometry_msgs::TransformStamped> tfs;
-    for (const auto& [id, traj] : server_->map().trajectories) {
-      const hermes::AgentStats* st = server_->bookkeeper().stats(traj.agent);
-      if (!traj.anchored || !st || st->current_session != traj.session) continue;
-      const auto name = names_.find(hermes::toString(traj.uuid));
-      geometry_msgs::TransformStamped tf;
-      tf.header = h;
-      tf.child_frame_id = (name != names_.end() ? name->second : "agent_" + std::to_string(traj.agent)) + "/odom";
-      const geometry_msgs::Pose p = toPose(traj.T_W_A);
-      tf.transform.translation.x = p.position.x;
-      tf.transform.translation.y = p.position.y;
-      tf.transform.translation.z = p.position.z;
-      tf.transform.rotation = p.orientation;
-      tfs.push_back(tf);
-    }
-    if (tfs.empty()) {  // the fixed frame exists before any agent is anchored
-      geometry_msgs::TransformStamped tf;
-      tf.header = h;
-      tf.child_frame_id = "hermes_origin";
-      tf.transform.rotation.w = 1.0;
-      tfs.push_back(tf);
-    }
-    tf_.sendTransform(tfs);
+    geometry_msgs::TransformStamped tf;
+    tf.header = h;
+    tf.child_frame_id = "hermes_origin";
+    tf.transform.rotation.w = 1.0;
+    tf_.sendTransform(tf);
   }
 
   void publishOutputs() {
+    publishGlobalPoses();  // also once a second: a robot that (re)connects hears it
     std_msgs::String status;
     status.data = hermes::metricsToJsonString(hermes::server::serverMetrics(*server_), -1);
     status_pub_.publish(status);
@@ -281,7 +295,7 @@ class ServerNode {
   std::string output_dir_;
   std::unique_ptr<hermes::transport::MqttServerLink> mqtt_;  ///< set: transport mqtt
   ros::WallTimer mqtt_timer_;
-  ros::Publisher ack_pub_, status_pub_, map_pub_, loops_pub_;
+  ros::Publisher ack_pub_, status_pub_, map_pub_, loops_pub_, global_pub_;
   std::map<hermes::RobotId, ros::Publisher> path_pubs_;
   std::map<std::string, std::string> names_;
   ros::Subscriber submap_sub_, hb_sub_;

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "hermes/agent/dataset_feed.h"
+#include "hermes/server/server_outputs.h"
 
 namespace hermes::system {
 namespace fs = std::filesystem;
@@ -142,6 +143,21 @@ void OfflineRun::acknowledge(double t) {
     if (a.pipeline->onAck(k.session, k.seq, t)) ++a.acked;
   }
   acks_.erase(acks_.begin(), acks_.begin() + static_cast<std::ptrdiff_t>(done));
+  std::size_t g = 0;
+  for (; g < globals_.size() && globals_[g].time <= t; ++g)
+    agents_[globals_[g].agent].pipeline->onGlobalPose(globals_[g].update, t);
+  globals_.erase(globals_.begin(), globals_.begin() + static_cast<std::ptrdiff_t>(g));
+}
+
+void OfflineRun::sendGlobalPoses(double t) {
+  // Down the link with its latency; lost while the link is down. No loss draw:
+  // the updates are tiny and repeated after every merge, and drawing would
+  // change the submaps' losses against runs without them.
+  const LinkState s = link_->trace().at(t);
+  if (s.rate_mbitps <= 0) return;
+  for (const auto& [robot, update] : server::globalPoseUpdates(server_->map()))
+    for (std::size_t i = 0; i < agents_.size(); ++i)
+      if (agents_[i].robot == robot) globals_.push_back({t + s.latency_ms * 1e-3, i, update});
 }
 
 Status OfflineRun::feedDueFrames(double t) {
@@ -163,6 +179,10 @@ Status OfflineRun::feedDueFrames(double t) {
                    frame.error()};
     auto r = next->pipeline->feed(*frame);
     if (!r.ok()) return Error{"frame " + std::to_string(next->next) + ": " + r.error()};
+    const Trajectory& odo = next->pipeline->trajectory();
+    if (!odo.empty() && odo.back().t == frame->stamp)
+      if (const auto T_W_B = next->pipeline->globalPose().inWorld(odo.back().T_W_B))
+        next->global_track.push_back({frame->stamp, *T_W_B});
     if (++next->next == next->frames) {
       next->pipeline->flushWindow();  // the last, partial window
       next->next_retry = t + params_.run.agent.tracker.window.period_s;
@@ -261,7 +281,7 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     if (Status s = feedDueFrames(t); !s) return s;
     retryCarriedWindows(t);
     if (server_ && t + 1e-9 >= next_server_) {
-      server_->process(t);
+      if (server_->process(t) > 0) sendGlobalPoses(t);
       next_server_ += c.server_period_s;
     }
     while (t + 1e-9 >= next_sample_ + c.sample_period_s) {
@@ -298,9 +318,13 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     server_up_at_ = now_;
     if (Status s = restartServer(now_); !s) return s;
   }
-  // Whatever arrived is merged, and the graph is optimised once more.
+  // Whatever arrived is merged, and the graph is optimised once more; the robots
+  // hear where they ended up.
   server_->process(now_);
   if (Status s = server_->mapManager().optimize(/*full=*/true); !s) return s;
+  sendGlobalPoses(now_);
+  for (const PendingGlobal& g : globals_) agents_[g.agent].pipeline->onGlobalPose(g.update, g.time);
+  globals_.clear();
   return server_->checkpoint(now_);  // clean shutdown (no-op without a checkpoint directory)
 }
 

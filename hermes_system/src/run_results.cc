@@ -154,6 +154,27 @@ Status writeFile(const fs::path& path, F&& body) {
   return Status::Ok();
 }
 
+/// Each robot's own idea of its place in the world (OfflineAgent::global_track)
+/// against ground truth under the merged map's one alignment.
+void globalPoseAccuracy(const OfflineRun& run, const eval::Alignment& alignment, RunMetrics* m) {
+  const eval::EvalParams& ep = run.params().run.eval;
+  for (AgentMetrics& am : m->per_agent) {
+    const auto it = std::find_if(run.agents().begin(), run.agents().end(),
+                                 [&](const OfflineAgent& o) { return o.name == am.agent; });
+    if (it == run.agents().end()) continue;
+    const OfflineAgent& a = *it;
+    am.global_pose_updates = static_cast<std::int64_t>(a.pipeline->globalPose().updates());
+    const Trajectory& gt = a.dataset->info().groundtruth;
+    if (gt.empty() || a.global_track.size() < 2) continue;
+    auto ev = eval::evaluateTrajectory(gt, a.global_track, ep, a.name);
+    if (!ev.ok() || ev->assoc.t.empty()) continue;
+    const eval::AteResult r = eval::ateWithAlignment(ev->assoc, alignment);
+    if (r.trans_errors_m.empty()) continue;
+    am.global_pose_rmse_m = r.trans_m.rmse;
+    am.global_pose_final_m = r.trans_errors_m.back();
+  }
+}
+
 }  // namespace
 
 RunResults evaluateRun(const OfflineRun& run) {
@@ -201,6 +222,7 @@ RunResults evaluateRun(const OfflineRun& run) {
     auto ev = eval::evaluateAgents(merged, ep, /*allow_partial=*/true);
     if (ev.ok()) {
       fillAccuracy(*ev, ep, &m);
+      globalPoseAccuracy(run, ev->merged_alignment, &m);
       for (const eval::AgentFailure& f : ev->failed)
         res.warnings.push_back("merged trajectory of " + f.name + ": " + f.error);
     } else {
@@ -243,6 +265,9 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                                       a.pipeline->trajectory());
         !s)
       return s;
+    if (!a.global_track.empty())
+      if (Status s = writeTumTrajectory((traj_dir / (a.name + "_global.tum")).string(), a.global_track); !s)
+        return s;
     Trajectory mt = mergedTrajectory(run, a);
     if (mt.empty()) continue;
     if (Status s = writeTumTrajectory((traj_dir / (a.name + "_merged.tum")).string(), mt); !s)
@@ -290,6 +315,17 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
         }();
         for (std::size_t i = 0; i < r.trans_errors_m.size(); ++i)
           ate << a.assoc.t[i] - t0 << ',' << a.name << ",merged," << r.trans_errors_m[i] << '\n';
+      }
+    // kind global: each robot's own world pose as it knew it, same alignment.
+    if (ev.ok())
+      for (const OfflineAgent& o : run.agents()) {
+        const Trajectory& gt = o.dataset->info().groundtruth;
+        if (gt.empty() || o.global_track.size() < 2) continue;
+        auto g = eval::evaluateTrajectory(gt, o.global_track, ep, o.name);
+        if (!g.ok()) continue;
+        const eval::AteResult r = eval::ateWithAlignment(g->assoc, ev->merged_alignment);
+        for (std::size_t i = 0; i < r.trans_errors_m.size(); ++i)
+          ate << g->assoc.t[i] - o.clock_offset << ',' << o.name << ",global," << r.trans_errors_m[i] << '\n';
       }
   }
   if (Status s = writeFile(out / "ate_over_time.csv", [&](std::ostream& o) { o << ate.str(); }); !s)
@@ -408,6 +444,13 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
                   static_cast<long long>(a.submaps_deferred.value_or(0)),
                   double(a.bytes.value_or(0)) / 1000.0);
     o << buf;
+    if (a.global_pose_final_m) {  // what the robot itself knew of its place in the world
+      std::snprintf(buf, sizeof buf,
+                    "  %-14s own global pose: %.2f cm at its last frame, %.2f cm RMSE over time, %lld update(s)\n",
+                    "", cm(a.global_pose_final_m), cm(a.global_pose_rmse_m),
+                    static_cast<long long>(a.global_pose_updates.value_or(0)));
+      o << buf;
+    }
     if (a.trouble_windows.value_or(0) > 0) {  // windows distilled with more keyframes / budget
       std::snprintf(buf, sizeof buf, "  %-14s in trouble: %lld window(s), %lld weak frame(s)\n", "",
                     static_cast<long long>(*a.trouble_windows),

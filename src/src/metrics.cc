@@ -104,6 +104,9 @@ void to_json(json& j, const AgentMetrics& m) {
   if (m.held_bytes_peak) j["held_bytes_peak"] = *m.held_bytes_peak;
   if (m.weak_frames) j["weak_frames"] = *m.weak_frames;
   if (m.trouble_windows) j["trouble_windows"] = *m.trouble_windows;
+  if (m.global_pose_rmse_m) j["global_pose_rmse_m"] = *m.global_pose_rmse_m;
+  if (m.global_pose_final_m) j["global_pose_final_m"] = *m.global_pose_final_m;
+  if (m.global_pose_updates) j["global_pose_updates"] = *m.global_pose_updates;
 }
 
 void to_json(json& j, const RunMetrics& m) {
@@ -260,6 +263,9 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.held_bytes_peak = r.integer("held_bytes_peak", false);
   a.weak_frames = r.integer("weak_frames", false);
   a.trouble_windows = r.integer("trouble_windows", false);
+  a.global_pose_rmse_m = r.number("global_pose_rmse_m", false);
+  a.global_pose_final_m = r.number("global_pose_final_m", false);
+  a.global_pose_updates = r.integer("global_pose_updates", false);
   return a;
 }
 

@@ -123,6 +123,11 @@ Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clo
   return Status::Ok();
 }
 
+bool AgentPipeline::onGlobalPose(const GlobalPoseUpdate& update, double now) {
+  std::lock_guard<std::mutex> lock(global_mu_);
+  return global_pose_.update(update, session_, now);
+}
+
 Status AgentPipeline::onAck(std::uint32_t session, std::uint64_t seq, double now) {
   std::lock_guard<std::mutex> lock(uplink_mu_);
   if (!uplink_) return Error{"agent " + name_ + ": acknowledgement without an uplink"};

@@ -25,6 +25,23 @@ Trajectory agentTrajectory(const GlobalMap& map, std::uint32_t agent,
   return out;
 }
 
+std::vector<std::pair<std::uint32_t, GlobalPoseUpdate>> globalPoseUpdates(const GlobalMap& map) {
+  std::vector<std::pair<std::uint32_t, GlobalPoseUpdate>> out;
+  for (const auto& [tid, t] : map.trajectories) {
+    if (!t.anchored || t.keyframes.empty()) continue;
+    const StoredKeyframe* newest = nullptr;
+    for (const auto& [id, kf] : t.keyframes)
+      if (!newest || kf.keyframe.stamp > newest->keyframe.stamp) newest = &kf;
+    GlobalPoseUpdate u;
+    u.session = t.session;
+    u.keyframe_stamp = newest->keyframe.stamp;
+    u.keyframes = t.keyframes.size();
+    u.T_W_O = newest->T_W_C * newest->keyframe.T_A_C.inverse();
+    out.emplace_back(t.agent, u);
+  }
+  return out;
+}
+
 Expected<std::vector<std::string>> writeAgentTrajectories(const GlobalMap& map,
                                                           const std::string& dir,
                                                           const std::map<std::uint32_t, SE3>& T_B_C) {

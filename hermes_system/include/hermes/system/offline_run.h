@@ -56,6 +56,9 @@ struct OfflineAgent {
   std::size_t duplicates = 0;  ///< frames the server only acknowledged again (already accepted)
   std::set<std::pair<std::uint32_t, std::uint64_t>> sent;  ///< (session, seq) handed to the link
   double next_retry = 0;  ///< [s] after the last frame: next try of a deferred window
+  /// Body poses in the world as the robot knew them when it tracked each frame
+  /// (its odometry through the server's latest world <- odom; from the first one on).
+  Trajectory global_track;
 };
 
 /// One server restart of the run (metrics.json "server_restarts").
@@ -128,6 +131,14 @@ class OfflineRun {
     std::uint32_t session;
     std::uint64_t seq;
   };
+  /// A world <- odom update on its way to a robot (after a merge).
+  struct PendingGlobal {
+    double time;
+    std::size_t agent;
+    GlobalPoseUpdate update;
+  };
+  /// After a merge: every anchored robot's world <- odom goes down the link.
+  void sendGlobalPoses(double t);
   struct MessageKey {
     std::size_t agent;
     std::uint32_t session;
@@ -141,6 +152,7 @@ class OfflineRun {
   std::map<std::uint64_t, MessageKey> messages_;  ///< link message id -> submap
   std::uint64_t next_message_ = 0;
   std::vector<PendingAck> acks_;                  ///< sorted by time on use
+  std::vector<PendingGlobal> globals_;            ///< in time order
   std::vector<BandwidthSample> bandwidth_;
   std::map<std::string, std::vector<std::pair<double, double>>> estimates_;
   std::vector<std::size_t> last_transmitted_;

@@ -88,6 +88,11 @@ struct AgentMetrics {
   std::optional<int64_t> held_bytes_peak;       ///< server: the most ever held at once [B]
   std::optional<int64_t> weak_frames;           ///< agent: frames tracked with few inliers
   std::optional<int64_t> trouble_windows;       ///< agent: windows distilled as in trouble
+  /// What the robot knew of its own place in the world (server's world <- odom x
+  /// its odometry), under the run's common alignment: RMSE over the frames since
+  /// the first update, and the error at its last frame [m].
+  std::optional<double> global_pose_rmse_m, global_pose_final_m;
+  std::optional<int64_t> global_pose_updates;   ///< world <- odom updates it took
 };
 
 struct RunMetrics {

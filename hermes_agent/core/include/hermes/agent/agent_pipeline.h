@@ -44,6 +44,7 @@
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/uplink_sender.h"
 #include "hermes/agent/window_step.h"
+#include "hermes/core/global_pose.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/trajectory.h"
 #include "hermes/distill/distiller.h"
@@ -159,6 +160,16 @@ class AgentPipeline {
   }
   std::uint32_t session() const { return session_; }
 
+  /// The server's world <- odometry for this robot after a merge (global_pose.h);
+  /// false when not taken (another session, older than the one held, not finite).
+  /// Any thread.
+  bool onGlobalPose(const GlobalPoseUpdate& update, double now);
+  /// What this robot knows of its place in the global map (empty before the first).
+  GlobalPoseState globalPose() const {
+    std::lock_guard<std::mutex> lock(global_mu_);
+    return global_pose_;
+  }
+
  private:
   AgentPipeline(const AgentPipelineParams& params, const std::string& name,
                 const AgentCamera& camera, std::unique_ptr<distill::Distiller> distiller);
@@ -194,6 +205,8 @@ class AgentPipeline {
   Trajectory trajectory_;
   Uuid agent_id_{};
   std::uint32_t session_ = 1;
+  mutable std::mutex global_mu_;
+  GlobalPoseState global_pose_;
   std::unique_ptr<UplinkSender> uplink_;
   double clock_offset_ = 0;
   std::function<double()> uplink_clock_;

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "hermes/core/global_pose.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/trajectory.h"
 #include "hermes/server/server.h"
@@ -18,6 +19,11 @@ namespace server {
 /// sorted by stamp: T_W_C, or T_W_B = T_W_C * T_B_C^-1 when T_B_C is given.
 Trajectory agentTrajectory(const GlobalMap& map, std::uint32_t agent,
                            const std::optional<SE3>& T_B_C = std::nullopt);
+
+/// For every anchored trajectory: world <- odometry at its newest keyframe
+/// (T_W_C * T_A_C^-1 there), keyed by (robot, session) - what each robot is told
+/// after a merge (global_pose.h).
+std::vector<std::pair<std::uint32_t, GlobalPoseUpdate>> globalPoseUpdates(const GlobalMap& map);
 
 /// Writes <dir>/agent_<robot>.tum for every anchored agent; returns the paths.
 Expected<std::vector<std::string>> writeAgentTrajectories(
