@@ -173,6 +173,8 @@ RunResults evaluateRun(const OfflineRun& run) {
     timings.merge(a.pipeline->timings());
     AgentMetrics am = a.pipeline->metrics();
     am.bytes = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
+    if (run.network())  // what really went onto a link (a robot without a route sends nothing)
+      am.bytes = std::llround(run.network()->ownBytes(static_cast<std::size_t>(&a - run.agents().data())));
     bytes_total += *am.bytes;
     am.submaps_applied = 0;
     if (a.robot) {
