@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <filesystem>
 #include <limits>
-#include <set>
 
 namespace hermes::system {
 namespace fs = std::filesystem;
@@ -108,7 +107,8 @@ void RelayNetwork::send(std::size_t agent, std::uint32_t session, std::uint64_t 
   now_ = std::max(now_, now);
   const int l = route(agent, now);
   if (l < 0) return;  // no link at all: the spool resends it later
-  if (spools_[agent]) own_evidence_[agent].onFrame(frame, now, /*duplicate=*/false);
+  if (spools_[agent])  // a relay's own stream: its credibility evidence
+    own_evidence_[agent].onFrame(frame, now, !own_sent_.insert({agent, session, seq}).second);
   queue(static_cast<std::size_t>(l), 0, agent, session, seq, frame, now);
 }
 

@@ -45,6 +45,12 @@ std::optional<RelaySummary> summarizeRelay(const OfflineRun& run) {
       if (!lowest || mbitps < *lowest) lowest = mbitps;
     }
     r.min_relayed_mbitps = lowest;
+    if (auto e = run.estimates().find(a.name); e != run.estimates().end()) {
+      std::vector<double> kBps;
+      for (const auto& [t, Bps] : e->second)  // over the mission (not a long drain's decay)
+        if (Bps > 0 && t <= s.mission_s) kBps.push_back(Bps / 1000.0);
+      if (!kBps.empty()) r.planned_kBps = timing::percentile(kBps, 50);
+    }
     s.robots.push_back(r);
   }
   s.min_relayed_mbitps = net->minRelayedMbitps(period);
@@ -65,6 +71,7 @@ nlohmann::json relayJson(const RelaySummary& s) {
                         {"submaps_applied", r.applied},
                         {"exactly_once", r.exactly_once}};
     j["min_relayed_mbitps"] = r.min_relayed_mbitps ? nlohmann::json(*r.min_relayed_mbitps) : nlohmann::json();
+    j["planned_kBps"] = r.planned_kBps ? nlohmann::json(*r.planned_kBps) : nlohmann::json();
     robots.push_back(j);
   }
   nlohmann::json j = {{"scenario", s.scenario},
@@ -86,9 +93,9 @@ std::string formatRelay(const RelaySummary& s) {
   o << buf;
   for (const RelayRobotReport& r : s.robots) {
     std::snprintf(buf, sizeof buf,
-                  "  %-14s own %7.1f kB/s  relayed for others %7.1f kB/s  via relay %zu submap(s)%s%s  "
-                  "applied %zu/%zu%s\n",
-                  r.agent.c_str(), r.own_kBps, r.relayed_kBps, r.relayed_submaps,
+                  "  %-14s own %7.1f kB/s  relayed for others %7.1f kB/s  planned on %7.1f kB/s  "
+                  "via relay %zu submap(s)%s%s  applied %zu/%zu%s\n",
+                  r.agent.c_str(), r.own_kBps, r.relayed_kBps, r.planned_kBps.value_or(0.0), r.relayed_submaps,
                   r.relayed_by.empty() ? "" : " by ", r.relayed_by.c_str(), r.applied, r.submitted,
                   r.min_relayed_mbitps
                       ? ("  min " + std::to_string(*r.min_relayed_mbitps).substr(0, 5) + " Mbit/s").c_str()

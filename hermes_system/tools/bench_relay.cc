@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <iterator>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -164,6 +165,31 @@ int main(int argc, char** argv) {
   fs::remove_all(views);
   const nlohmann::json& relayed = out["with_relay"]["relay"]["min_relayed_mbitps"];
   out["min_relayed_mbitps"] = relayed;
+  // Per robot side by side: merged or not, its own rate and what it forwarded.
+  nlohmann::json table = nlohmann::json::array();
+  std::fprintf(stderr, "%-10s | %-28s | %-28s\n", "robot", "with relay: merged ATE, own/relayed kB/s",
+               "without: merged ATE, own kB/s");
+  for (std::size_t i = 0; i < std::size(kRobots); ++i) {
+    nlohmann::json row = {{"agent", kRobots[i].name}};
+    std::string cells[2];
+    for (int k = 0; k < 2; ++k) {
+      const nlohmann::json& m = out[k == 0 ? "with_relay" : "without_relay"];
+      const nlohmann::json& rr = m["relay"]["robots"][i];
+      const nlohmann::json ate = m["per_agent"][i].value("merged_ate_rmse_m", nlohmann::json());
+      const std::string key = k == 0 ? "with_relay" : "without_relay";
+      row[key] = {{"merged_ate_m", ate}, {"own_kBps", rr["own_kBps"]}, {"relayed_kBps", rr["relayed_kBps"]},
+                  {"exactly_once", rr["exactly_once"]}};
+      char buf[96];
+      char ate_text[32] = "unmerged";
+      if (ate.is_number()) std::snprintf(ate_text, sizeof ate_text, "%.2f cm", ate.get<double>() * 100);
+      std::snprintf(buf, sizeof buf, "%-9s %6.1f / %5.1f", ate_text, rr["own_kBps"].get<double>(),
+                    rr["relayed_kBps"].get<double>());
+      cells[k] = buf;
+    }
+    std::fprintf(stderr, "%-10s | %-28s | %-28s\n", kRobots[i].name, cells[0].c_str(), cells[1].c_str());
+    table.push_back(row);
+  }
+  out["per_robot"] = table;
   const std::string text = out.dump(2) + "\n";
   if (json_out.empty()) {
     std::cout << text;

@@ -87,41 +87,35 @@ TEST(RelaySplit, EvidenceFromFrames) {
   EXPECT_NEAR(s.obs_per_landmark, double(sm.observationCount()) / double(sm.landmarks.size()), 1e-9);
 }
 
-TEST(RelaySplit, GuaranteedFloorHoldsOnTheLink) {
-  // A 4 Mbit/s uplink: the relay's own map weighs 0.9 and floods it; the
-  // relayed robot still gets its 1 Mbit/s while it has data waiting.
+namespace {
+
+/// A 4 Mbit/s uplink whose slot 0 (the relay's own map, weight 0.9) holds 2 MB
+/// and slot 1 (a relayed robot, weight 0.1, `guaranteed_Bps`) 250 kB, run for 1 s.
+SharedLink floodedUplink(double guaranteed_Bps) {
   SharedLink link(LinkTrace::constant(4.0), 2, 1);
   link.setShare(0, 0.9, 0.0);
-  link.setShare(1, 0.1, 125000.0);
-  for (int i = 0; i < 20; ++i) {
-    LinkMessage own;
-    own.sender = 0;
-    own.id = static_cast<std::uint64_t>(i);
-    own.bytes = 100000;
-    link.send(own, 0.0);
+  link.setShare(1, 0.1, guaranteed_Bps);
+  for (int i = 0; i <= 20; ++i) {
+    LinkMessage m;
+    m.sender = i < 20 ? 0 : 1;
+    m.id = static_cast<std::uint64_t>(i);
+    m.bytes = i < 20 ? 100000 : 250000;
+    link.send(m, 0.0);
   }
-  LinkMessage relayed;
-  relayed.sender = 1;
-  relayed.id = 100;
-  relayed.bytes = 250000;  // 2 s at 1 Mbit/s
-  link.send(relayed, 0.0);
   link.advanceTo(1.0);
+  return link;
+}
+
+}  // namespace
+
+TEST(RelaySplit, GuaranteedFloorHoldsOnTheLink) {
+  // The relay's own map floods the link; the relayed robot still gets its
+  // 1 Mbit/s while it has data waiting, plus its weight's part of what the
+  // guarantee leaves (like tc htb).
+  const SharedLink link = floodedUplink(125000.0);
   const double rate = link.servedBytes(1) / link.backloggedUpSeconds(1);
-  // The floor, plus its weight's part of what the guarantee leaves (like tc htb).
   EXPECT_NEAR(rate, 125000.0 + 0.1 * (500000.0 - 125000.0), 3000.0);
   EXPECT_NEAR(link.servedBytes(0) + link.servedBytes(1), 500000.0, 1500.0);  // work-conserving
-  // Without the guarantee its weight alone would give it 0.4 Mbit/s.
-  SharedLink weighted(LinkTrace::constant(4.0), 2, 1);
-  weighted.setShare(0, 0.9, 0.0);
-  weighted.setShare(1, 0.1, 0.0);
-  for (int i = 0; i < 20; ++i) {
-    LinkMessage own;
-    own.sender = 0;
-    own.id = static_cast<std::uint64_t>(i);
-    own.bytes = 100000;
-    weighted.send(own, 0.0);
-  }
-  weighted.send(relayed, 0.0);
-  weighted.advanceTo(1.0);
-  EXPECT_NEAR(weighted.servedBytes(1), 50000.0, 3000.0);
+  // Without the guarantee its weight alone gives it 0.4 Mbit/s.
+  EXPECT_NEAR(floodedUplink(0.0).servedBytes(1), 50000.0, 3000.0);
 }

@@ -24,7 +24,9 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "hermes/agent/relay_spool.h"
@@ -135,8 +137,8 @@ class RelayNetwork {
   std::vector<Link> links_;
   std::vector<int> server_link_;  ///< per robot: index into links_, or -1
   std::vector<std::unique_ptr<agent::RelaySpool>> spools_;  ///< per robot (null: relays nobody)
-  std::vector<agent::StreamEvidence> own_evidence_;
-  std::vector<double> own_bytes_;  ///< per robot
+  std::vector<agent::StreamEvidence> own_evidence_;  ///< relays: their own stream
+  std::set<std::tuple<std::size_t, std::uint32_t, std::uint64_t>> own_sent_;  ///< relays: (robot, session, seq)
   std::vector<RobotTraffic> traffic_;
   std::map<std::uint64_t, Message> messages_;
   std::uint64_t next_message_ = 0;

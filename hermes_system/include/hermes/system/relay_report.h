@@ -25,6 +25,9 @@ struct RelayRobotReport {
   std::size_t submitted = 0, accepted = 0, applied = 0;  ///< its uplink / the server's bookkeeper
   bool exactly_once = false;      ///< every submap it made applied once, its spool drained
   std::optional<double> min_relayed_mbitps;  ///< while relayed (RelayNetwork::minRelayedMbitps)
+  /// Median of its monitor's non-zero estimates over the mission [kB/s]: the rate
+  /// its coordinator planned with (for a relayed robot: of its link to the relay).
+  std::optional<double> planned_kBps;
 };
 
 struct RelaySummary {
