@@ -3,8 +3,9 @@
 // 4G-like links with outages; two aerial robots never reach the server and
 // reach one ground robot each, intermittently (config/scenarios/relay_outdoor).
 // The robots are time windows of the whole-sequence renders of the hall
-// (dataset_window.h): ground_1 = MH_01 0..D s, ground_2 = MH_02 0..D s,
-// aerial_1 = MH_03 0..D s, aerial_2 = MH_01 20..20+D s. The same scenario runs
+// (dataset_window.h; without them, those windows rendered once into a cache):
+// ground_1 = MH_01 0..D s, ground_2 = MH_02 0..D s, aerial_1 = MH_03 0..D s,
+// aerial_2 = MH_01 20..20+D s. The same scenario runs
 // twice, relaying on and off; prints a table on stderr and writes
 //   {"with_relay": METRICS, "without_relay": METRICS, "min_relayed_mbitps": X, ...}
 // (METRICS: metrics.json of DESIGN §7 with its "relay" block) on stdout or --json.
@@ -12,6 +13,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iterator>
+#include <map>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -22,6 +24,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "hermes/core/render_cache.h"
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
@@ -32,11 +35,13 @@ namespace fs = std::filesystem;
 namespace {
 
 const char* kUsage =
-    "usage: hermes_bench_relay [--duration S] [--data DIR] [--scenario FILE]\n"
+    "usage: hermes_bench_relay [--duration S] [--data DIR] [--cache DIR] [--scenario FILE]\n"
     "                          [--set KEY=VALUE]... [--json FILE]\n"
     "  --duration S     seconds each robot flies (default 20)\n"
-    "  --data DIR       whole-sequence renders of MH_01..03 (default data_cache/mh_full;\n"
-    "                   rendered there from ../shared/data/euroc_gt when missing)\n"
+    "  --data DIR       whole-sequence renders of MH_01..03 (default data_cache/mh_full, as\n"
+    "                   bench system --swarm makes them); the robots are windows of them\n"
+    "  --cache DIR      without them: the robots' windows are rendered here once\n"
+    "                   (default data_cache/bench_relay)\n"
     "  --scenario FILE  who reaches whom (default config/scenarios/relay_outdoor/scenario.txt;\n"
     "                   robots ground_1, ground_2, aerial_1, aerial_2)\n"
     "  --set KEY=VALUE  configuration override for both runs (repeatable)\n"
@@ -98,6 +103,7 @@ Expected<nlohmann::json> runOnce(bool relay, const std::string& views, const std
 int main(int argc, char** argv) {
   double duration = 20;
   std::string data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
+  std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/bench_relay";
   std::string scenario = std::string(HERMES_SOURCE_DIR) + "/config/scenarios/relay_outdoor/scenario.txt";
   std::string json_out;
   std::vector<std::string> sets;
@@ -117,6 +123,8 @@ int main(int argc, char** argv) {
       duration = std::atof(next().c_str());
     } else if (a == "--data") {
       data = next();
+    } else if (a == "--cache") {
+      cache = next();
     } else if (a == "--scenario") {
       scenario = next();
     } else if (a == "--set") {
@@ -134,16 +142,39 @@ int main(int argc, char** argv) {
     return std::fprintf(stderr, "hermes_bench_relay: scenario file '%s' does not exist\n", scenario.c_str()), 2;
 
   const double rate = 20;
-  std::fprintf(stderr, "[bench relay] renders in %s (rendering MH_01..03 there if missing)\n", data.c_str());
-  if (Status s = system::ensureWholeRenders(data, {"MH_01_easy", "MH_02_easy", "MH_03_medium"},
-                                            std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt", rate);
-      !s)
-    return std::fprintf(stderr, "hermes_bench_relay: %s\n", s.error().c_str()), 1;
+  const std::vector<std::string> seqs = {"MH_01_easy", "MH_02_easy", "MH_03_medium"};
+  bool whole = true;
+  for (const std::string& q : seqs) whole = whole && fs::exists(fs::path(data) / q / "mav0");
+  // Where each robot's sequence lives, by its start: windows of the whole
+  // renders, or (without them) just the robots' windows rendered once into the cache.
+  std::map<double, fs::path> source;
+  if (whole) {
+    std::fprintf(stderr, "[bench relay] robots are windows of the whole renders in %s\n", data.c_str());
+    for (const Robot& r : kRobots) source[r.start_s] = data;
+  } else {
+    std::fprintf(stderr, "[bench relay] no whole renders in %s: rendering the robots' %g-s windows into %s "
+                         "(once; minutes)\n", data.c_str(), duration, cache.c_str());
+    for (const Robot& r : kRobots) {
+      if (source.count(r.start_s)) continue;
+      RenderRequest req;
+      for (const std::string& q : seqs)
+        req.trajectories.push_back(std::string(HERMES_SOURCE_DIR) + "/config/trajectories/" + q + ".txt");
+      req.start_s = r.start_s;
+      req.duration_s = duration;
+      req.rate_hz = rate;
+      char key[64];
+      std::snprintf(key, sizeof key, "d%g_s%g", duration, r.start_s);
+      const fs::path folder = fs::path(cache) / key;
+      if (Status st = renderCached(req, folder.string()); !st)
+        return std::fprintf(stderr, "hermes_bench_relay: %s\n", st.error().c_str()), 1;
+      source[r.start_s] = folder;
+    }
+  }
   const std::string views =
       (fs::temp_directory_path() / ("hermes_bench_relay_views_" + std::to_string(::getpid()))).string();
   for (const Robot& r : kRobots) {
-    auto w = system::writeEurocWindow((fs::path(data) / r.sequence).string(), r.start_s, duration,
-                                      (fs::path(views) / r.name).string());
+    auto w = system::writeEurocWindow((source[r.start_s] / r.sequence).string(), whole ? r.start_s : 0.0,
+                                      duration, (fs::path(views) / r.name).string());
     if (!w) return std::fprintf(stderr, "hermes_bench_relay: %s: %s\n", r.name, w.error().c_str()), 1;
   }
 
