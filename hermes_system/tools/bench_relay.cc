@@ -28,6 +28,7 @@
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
+#include "hermes/system/scenario.h"
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -141,6 +142,15 @@ int main(int argc, char** argv) {
   if (!fs::exists(scenario))
     return std::fprintf(stderr, "hermes_bench_relay: scenario file '%s' does not exist\n", scenario.c_str()), 2;
 
+  {  // bad input before any rendering: the overrides and the scenario
+    auto config = agent::loadRunConfig("", sets);
+    auto params = config ? system::readSystemParams(*config) : Expected<system::SystemParams>(Error{config.error()});
+    if (!params) return std::fprintf(stderr, "hermes_bench_relay: %s\n", params.error().c_str()), 2;
+    std::vector<std::string> names;
+    for (const Robot& r : kRobots) names.push_back(r.name);
+    auto sc = system::Scenario::fromFile(scenario, names);
+    if (!sc) return std::fprintf(stderr, "hermes_bench_relay: %s\n", sc.error().c_str()), 2;
+  }
   const double rate = 20;
   const std::vector<std::string> seqs = {"MH_01_easy", "MH_02_easy", "MH_03_medium"};
   bool whole = true;
