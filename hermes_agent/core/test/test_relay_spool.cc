@@ -84,6 +84,10 @@ TEST(RelaySpool, ExactlyOnceThroughTheRelayWithAcksBack) {
   }
   EXPECT_EQ(origin->backlogBytes(), 0u);
   EXPECT_EQ(origin->buffer().pendingCount(), 4u);
+  // The hop acknowledgements measured the link to the relay: the origin's
+  // coordinator plans with that rate (4 submaps delivered in 1.1 s).
+  EXPECT_GT(origin->monitor().samples(), 0);
+  EXPECT_NEAR(origin->monitor().estimate(1.1), double(origin_bytes) / 1.1, 0.5 * double(origin_bytes));
   EXPECT_EQ(origin->handedOverCount(), 4u);
   to_relay.clear();
   origin->poll(100.0);
