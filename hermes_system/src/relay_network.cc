@@ -251,10 +251,10 @@ void RelayNetwork::sample(double t, double period_s) {
   }
 }
 
-std::optional<double> RelayNetwork::minRelayedMbitps(double period_s) const {
+std::optional<double> RelayNetwork::minRelayedMbitps(double period_s, const std::string& origin) const {
   std::optional<double> lowest;
   for (const RelayedSample& s : samples_) {
-    if (s.backlogged_up_s < 0.5 * period_s) continue;
+    if (s.backlogged_up_s < 0.5 * period_s || (!origin.empty() && s.origin != origin)) continue;
     const double mbitps = s.served_kB * 8e-3 / s.backlogged_up_s;
     if (!lowest || mbitps < *lowest) lowest = mbitps;
   }

@@ -37,14 +37,7 @@ std::optional<RelaySummary> summarizeRelay(const OfflineRun& run) {
     r.exactly_once = r.submitted > 0 && r.applied == r.submitted && r.accepted == r.applied &&
                      a.pipeline->uplink()->buffer().pendingCount() == 0;
     s.exactly_once = s.exactly_once && r.exactly_once;
-    // The lowest rate it got at a relay while it had data waiting there.
-    std::optional<double> lowest;
-    for (const RelayedSample& x : net->relayedSamples()) {
-      if (x.origin != a.name || x.backlogged_up_s < 0.5 * period) continue;
-      const double mbitps = x.served_kB * 8e-3 / x.backlogged_up_s;
-      if (!lowest || mbitps < *lowest) lowest = mbitps;
-    }
-    r.min_relayed_mbitps = lowest;
+    r.min_relayed_mbitps = net->minRelayedMbitps(period, a.name);
     if (auto e = run.estimates().find(a.name); e != run.estimates().end()) {
       std::vector<double> kBps;
       for (const auto& [t, Bps] : e->second)  // over the mission (not a long drain's decay)

@@ -97,8 +97,8 @@ class RelayNetwork {
   const std::vector<RelayedSample>& relayedSamples() const { return samples_; }
   /// Lowest rate [Mbit/s] a relayed robot got while it had data waiting at its
   /// relay and the relay's uplink was up (sample periods with at least half of
-  /// that); nullopt when nobody was relayed.
-  std::optional<double> minRelayedMbitps(double period_s) const;
+  /// that); nullopt when nobody was relayed. `origin` non-empty: that robot only.
+  std::optional<double> minRelayedMbitps(double period_s, const std::string& origin = "") const;
   const agent::RelaySpool* spool(std::size_t agent) const;
   const Scenario& scenario() const { return scenario_; }
 
