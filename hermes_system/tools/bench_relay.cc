@@ -94,6 +94,9 @@ Expected<nlohmann::json> runOnce(bool relay, const std::string& views, const std
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const system::RunResults r = system::evaluateRun(**run);
   *report = system::formatReport(**run, r);
+  run->reset();  // its spools closed: then removed
+  std::error_code ec;
+  fs::remove_all(spool, ec);
   nlohmann::json j = system::resultsJson(r);
   j["wall_s"] = wall;
   return j;
