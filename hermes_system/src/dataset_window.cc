@@ -1,5 +1,7 @@
 #include "hermes/system/dataset_window.h"
 
+#include "hermes/core/render_cache.h"
+
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -85,6 +87,19 @@ Expected<WindowInfo> writeEurocWindow(const std::string& source, double start_s,
     return Error{"dataset window of " + source + ": no frame in [" + std::to_string(start_s) + ", " +
                  std::to_string(start_s + duration_s) + ") s"};
   return info;
+}
+
+Status ensureWholeRenders(const std::string& data, const std::vector<std::string>& sequences,
+                          const std::string& trajectories_dir, double rate_hz) {
+  for (const std::string& seq : sequences) {
+    if (fs::exists(fs::path(data) / seq / "mav0")) continue;
+    RenderRequest req;  // all of them in one scene
+    for (const std::string& s : sequences)
+      req.trajectories.push_back((fs::path(trajectories_dir) / (s + ".txt")).string());
+    req.rate_hz = rate_hz;
+    return renderCached(req, data);
+  }
+  return Status::Ok();
 }
 
 }  // namespace hermes::system

@@ -70,6 +70,12 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     OfflineRun* self = run.get();
     Status s = (*pipeline)->attachUplink(
         [self, i](std::uint32_t session, std::uint64_t seq, const std::vector<std::uint8_t>& frame) {
+          OfflineAgent& sender = self->agents_[i];
+          if (!sender.sent.insert({session, seq}).second) ++sender.resent;
+          if (self->network_) {
+            self->network_->send(i, session, seq, frame, self->now_);
+            return;
+          }
           LinkMessage m;
           m.sender = static_cast<int>(i);
           m.id = self->next_message_++;
@@ -77,8 +83,6 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
           m.payload = std::make_shared<const std::vector<std::uint8_t>>(frame);
           m.send_time = self->now_;
           self->messages_[m.id] = MessageKey{i, session, seq};
-          OfflineAgent& sender = self->agents_[i];
-          if (!sender.sent.insert({session, seq}).second) ++sender.resent;
           self->link_->send(std::move(m), self->now_);
         },
         a.clock_offset);
@@ -91,7 +95,35 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
       std::none_of(run->agents_.begin(), run->agents_.end(),
                    [&](const OfflineAgent& a) { return a.name == params.corrupt.agent; }))
     return Error{"corrupt.agent '" + params.corrupt.agent + "' names no agent of this run"};
+  if (!params.link.scenario.empty())
+    if (Status s = run->createNetwork(spool_root); !s) return Error{s.error()};
   return run;
+}
+
+Status OfflineRun::createNetwork(const std::string& spool_root) {
+  std::vector<std::string> names;
+  for (const OfflineAgent& a : agents_) names.push_back(a.name);
+  auto scenario = Scenario::fromFile(params_.link.scenario, names);
+  if (!scenario) return Error{"link.scenario: " + scenario.error()};
+  NetworkHooks hooks;
+  hooks.to_server = [this](std::size_t i, std::uint32_t session, std::uint64_t seq,
+                           const std::vector<std::uint8_t>& bytes, double arrival) {
+    return receive(i, session, seq, bytes, arrival);
+  };
+  hooks.acked = [this](std::size_t i, std::uint32_t session, std::uint64_t seq, double t) {
+    if (agents_[i].pipeline->onAck(session, seq, t)) ++agents_[i].acked;
+  };
+  hooks.handed_over = [this](std::size_t i, std::uint32_t session, std::uint64_t seq, double t) {
+    (void)agents_[i].pipeline->onHandedOver(session, seq, t);
+  };
+  hooks.lost = [this](std::size_t i) { ++agents_[i].lost_messages; };
+  auto net = RelayNetwork::create(std::move(*scenario), params_.relay, params_.run.agent.uplink,
+                                  names, spool_root, static_cast<std::uint64_t>(params_.link.seed),
+                                  static_cast<std::size_t>(params_.link.packet_bytes), std::move(hooks));
+  if (!net) return Error{net.error()};
+  network_ = std::move(*net);
+  last_own_bytes_.assign(agents_.size(), 0.0);
+  return Status::Ok();
 }
 
 std::size_t OfflineRun::lostMessages() const {
@@ -101,36 +133,44 @@ std::size_t OfflineRun::lostMessages() const {
 }
 
 void OfflineRun::deliver(double t) {
+  if (network_) {
+    network_->deliver(t);
+    return;
+  }
   for (LinkDelivery& d : link_->advanceTo(t)) {
     auto it = messages_.find(d.message.id);
     if (it == messages_.end()) continue;
     const MessageKey key = it->second;
     messages_.erase(it);
-    OfflineAgent& a = agents_[key.agent];
     if (d.lost) {  // the sender's resend timeout brings it again
-      ++a.lost_messages;
+      ++agents_[key.agent].lost_messages;
       continue;
     }
-    if (!server_) {  // restarting: nobody receives it, the agent resends it
-      ++restarts_.back().frames_lost_down;
-      continue;
-    }
-    SubmapHeader claimed;
-    claimed.agent = a.pipeline->agentId();
-    claimed.session = key.session;
-    claimed.seq = key.seq;
-    const auto& bytes = *d.message.payload;
-    const ReceiveResult r = server_->onFrame(bytes.data(), bytes.size(), &claimed, d.arrival_time);
-    if (r.verdict == ArrivalVerdict::kAccept || r.verdict == ArrivalVerdict::kDuplicate)
-      a.robot = r.robot;
-    if (r.verdict == ArrivalVerdict::kDuplicate) ++a.duplicates;
-    if (r.verdict == ArrivalVerdict::kAccept && !restarts_.empty() &&
-        restarts_.back().first_accept_s < 0)
-      restarts_.back().first_accept_s = d.arrival_time;
-    if (!r.acknowledge) continue;
+    if (!receive(key.agent, key.session, key.seq, *d.message.payload, d.arrival_time)) continue;
     const double ack = link_->ackArrival(d.arrival_time);
     if (ack >= 0) acks_.push_back(PendingAck{ack, key.agent, key.session, key.seq});
   }
+}
+
+bool OfflineRun::receive(std::size_t i, std::uint32_t session, std::uint64_t seq,
+                         const std::vector<std::uint8_t>& bytes, double arrival) {
+  OfflineAgent& a = agents_[i];
+  if (!server_) {  // restarting: nobody receives it, the agent resends it
+    ++restarts_.back().frames_lost_down;
+    return false;
+  }
+  SubmapHeader claimed;
+  claimed.agent = a.pipeline->agentId();
+  claimed.session = session;
+  claimed.seq = seq;
+  const ReceiveResult r = server_->onFrame(bytes.data(), bytes.size(), &claimed, arrival);
+  if (r.verdict == ArrivalVerdict::kAccept || r.verdict == ArrivalVerdict::kDuplicate)
+    a.robot = r.robot;
+  if (r.verdict == ArrivalVerdict::kDuplicate) ++a.duplicates;
+  if (r.verdict == ArrivalVerdict::kAccept && !restarts_.empty() &&
+      restarts_.back().first_accept_s < 0)
+    restarts_.back().first_accept_s = arrival;
+  return r.acknowledge;
 }
 
 void OfflineRun::acknowledge(double t) {
@@ -143,6 +183,7 @@ void OfflineRun::acknowledge(double t) {
     if (a.pipeline->onAck(k.session, k.seq, t)) ++a.acked;
   }
   acks_.erase(acks_.begin(), acks_.begin() + static_cast<std::ptrdiff_t>(done));
+  if (network_) network_->acknowledge(t);
   std::size_t g = 0;
   for (; g < globals_.size() && globals_[g].time <= t; ++g)
     agents_[globals_[g].agent].pipeline->onGlobalPose(globals_[g].update, t);
@@ -231,6 +272,7 @@ Status OfflineRun::restartServer(double t) {
   // The robots see the server again (its acknowledgements resume) and resend
   // everything it has not acknowledged.
   for (OfflineAgent& a : agents_) a.pipeline->uplink()->onReconnect();
+  if (network_) network_->onServerBack();
   next_server_ = t + params_.clock.server_period_s;
   return Status::Ok();
 }
@@ -241,17 +283,25 @@ void OfflineRun::sample(double t) {
   std::optional<double> capacity;
   if (!link_->trace().unlimited()) capacity = st.rate_mbitps * 125.0;  // Mbit/s -> kB/s
   for (std::size_t i = 0; i < agents_.size(); ++i) {
-    const std::size_t tx = link_->transmittedBytes(static_cast<int>(i));
     BandwidthSample b;
     b.time_s = next_sample_;
     b.agent = agents_[i].name;
-    b.kBps = double(tx - last_transmitted_[i]) / period / 1000.0;
-    b.link_capacity_kBps = capacity;
+    if (network_) {  // its own submaps on its first hop, partial messages counted as they go
+      const double own = network_->ownBytes(i);
+      b.kBps = (own - last_own_bytes_[i]) / period / 1000.0;
+      b.link_capacity_kBps = network_->serverCapacityKBps(i, next_sample_);
+      last_own_bytes_[i] = own;
+    } else {
+      const std::size_t tx = link_->transmittedBytes(static_cast<int>(i));
+      b.kBps = double(tx - last_transmitted_[i]) / period / 1000.0;
+      b.link_capacity_kBps = capacity;
+      last_transmitted_[i] = tx;
+    }
     bandwidth_.push_back(b);
-    last_transmitted_[i] = tx;
     estimates_[agents_[i].name].emplace_back(
         t, agents_[i].pipeline->uplink()->monitor().estimate(t));
   }
+  if (network_) network_->sample(next_sample_ + period, period);
 }
 
 Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress) {
@@ -268,8 +318,8 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
   double next_progress = 0;
   auto backlog = [&] {
     std::size_t b = 0;
-    for (const OfflineAgent& a : agents_) b += a.pipeline->uplink()->backlogBytes();
-    return b + acks_.size();
+    for (const OfflineAgent& a : agents_) b += a.pipeline->uplink()->buffer().pendingBytes();
+    return b + acks_.size() + (network_ ? network_->pendingWork() : 0);
   };
   for (std::int64_t k = 0;; ++k) {
     const double t = double(k) * c.step_s;
@@ -278,6 +328,7 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     deliver(t);
     acknowledge(t);
     for (OfflineAgent& a : agents_) a.pipeline->pollUplink(t);
+    if (network_) network_->poll(t, c.server_period_s);
     if (Status s = feedDueFrames(t); !s) return s;
     retryCarriedWindows(t);
     if (server_ && t + 1e-9 >= next_server_) {

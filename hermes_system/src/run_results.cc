@@ -194,6 +194,8 @@ RunResults evaluateRun(const OfflineRun& run) {
     timings.merge(a.pipeline->timings());
     AgentMetrics am = a.pipeline->metrics();
     am.bytes = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
+    if (run.network())  // what really went onto a link (a robot without a route sends nothing)
+      am.bytes = std::llround(run.network()->ownBytes(static_cast<std::size_t>(&a - run.agents().data())));
     bytes_total += *am.bytes;
     am.submaps_applied = 0;
     if (a.robot) {
@@ -231,6 +233,7 @@ RunResults evaluateRun(const OfflineRun& run) {
   }
   loopAccuracy(run, &res);
   res.durability = summarizeDurability(run);
+  res.relay = summarizeRelay(run);
   return res;
 }
 
@@ -250,6 +253,7 @@ nlohmann::json resultsJson(const RunResults& res) {
   j["loops_per_pair"] = res.loops_per_pair;
   if (!res.warnings.empty()) j["warnings"] = res.warnings;
   if (res.durability) j.update(durabilityJson(*res.durability));
+  if (res.relay) j["relay"] = relayJson(*res.relay);
   return j;
 }
 
@@ -424,15 +428,18 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
                 cm(m.ate_rmse_m), static_cast<long long>(m.loops_accepted.value_or(0)),
                 static_cast<long long>(m.loops_rejected.value_or(0)));
   o << buf;
+  std::string link;
+  if (run.network())
+    link = "scenario " + run.params().link.scenario;
+  else if (run.link().trace().unlimited())
+    link = "unlimited";
+  else if (run.params().link.trace.empty())
+    link = fmtNumber(run.params().link.bandwidth_mbitps) + " Mbit/s shared";
+  else
+    link = "trace " + run.params().link.trace;
   std::snprintf(buf, sizeof buf, "bytes %.1f kB   uplink mean %.1f kB/s   peak %.1f kB/s   link %s\n",
                 double(m.bytes_total.value_or(0)) / 1000.0, m.kBps_mean.value_or(0),
-                m.kBps_peak.value_or(0),
-                run.link().trace().unlimited()
-                    ? "unlimited"
-                    : (run.params().link.trace.empty()
-                           ? (fmtNumber(run.params().link.bandwidth_mbitps) + " Mbit/s shared")
-                           : ("trace " + run.params().link.trace))
-                          .c_str());
+                m.kBps_peak.value_or(0), link.c_str());
   o << buf;
   for (const AgentMetrics& a : m.per_agent) {
     std::snprintf(buf, sizeof buf,
@@ -468,6 +475,7 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
     o << buf;
   }
   if (res.durability) o << formatDurability(*res.durability);
+  if (res.relay) o << formatRelay(*res.relay);
   for (const std::string& w : res.warnings) o << "warning: " << w << '\n';
   return o.str();
 }

@@ -7,7 +7,8 @@ namespace hermes::system {
 Status LinkParams::read(const Config& c) {
   for (Status s : {c.get("link.bandwidth_mbitps", &bandwidth_mbitps),
                    c.get("link.latency_ms", &latency_ms), c.get("link.loss", &loss),
-                   c.get("link.trace", &trace), c.get("link.packet_bytes", &packet_bytes),
+                   c.get("link.trace", &trace), c.get("link.scenario", &scenario),
+                   c.get("link.packet_bytes", &packet_bytes),
                    c.get("link.seed", &seed)})
     if (!s) return s;
   return validate();
@@ -27,6 +28,7 @@ void LinkParams::write(ConfigWriter& w) const {
   w.set("link.latency_ms", latency_ms);
   w.set("link.loss", loss);
   w.set("link.trace", trace);
+  w.set("link.scenario", scenario);
   w.set("link.packet_bytes", packet_bytes);
   w.set("link.seed", seed);
 }
@@ -76,6 +78,7 @@ Status SystemParams::read(const Config& config) {
   if (Status s = run.read(config); !s) return s;
   if (Status s = server.read(config, "server."); !s) return Error{"server: " + s.error()};
   if (Status s = link.read(config); !s) return s;
+  if (Status s = relay.read(config); !s) return s;
   if (Status s = clock.read(config); !s) return s;
   if (Status s = corrupt.read(config); !s) return s;
   if (Status s = transport.read(config); !s) return s;
@@ -83,7 +86,7 @@ Status SystemParams::read(const Config& config) {
 }
 
 Status SystemParams::validate() const {
-  for (Status s : {run.validate(), server.validate(), link.validate(), clock.validate(),
+  for (Status s : {run.validate(), server.validate(), link.validate(), relay.validate(), clock.validate(),
                    corrupt.validate(), transport.validate()})
     if (!s) return s;
   return Status::Ok();
@@ -94,6 +97,7 @@ std::string SystemParams::yaml() const {
   run.write(&w);
   server.write(w, "server.");
   link.write(w);
+  relay.write(w);
   clock.write(w);
   corrupt.write(&w);
   transport.write(w);

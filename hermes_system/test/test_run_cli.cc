@@ -164,6 +164,19 @@ TEST(RunCli, ErrorsExitTwoNamingTheCulprit) {
   o = run("--dataset " + kMicro + " --out " + out + " --link-trace /no/such/trace.csv", "notrace");
   EXPECT_EQ(o.code, 2);
   EXPECT_NE(o.err.find("/no/such/trace.csv"), std::string::npos) << o.err;
+  o = run("--dataset " + kMicro + " --out " + out + " --scenario /no/such/scenario.txt", "noscenario");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("scenario file /no/such/scenario.txt does not exist"), std::string::npos) << o.err;
+  const std::string scenario = ::testing::TempDir() + "/hermes_run_bad_scenario.txt";
+  std::ofstream(scenario) << "link euroc_V1_01_micro server const:5\nlink drone_9 server const:5\n";
+  o = run("--dataset " + kMicro + " --out " + out + " --scenario " + scenario, "badscenario");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find(scenario + ":2: unknown robot 'drone_9' (robots of this run: euroc_V1_01_micro)"),
+            std::string::npos)
+      << o.err;
+  o = run("--dataset " + kMicro + " --out " + out + " --scenario " + scenario + " --bandwidth 5", "twolinks");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("exclude each other"), std::string::npos) << o.err;
   o = run("--dataset " + kMicro + " --out " + out + " --set link.loss=1.5", "badloss");
   EXPECT_EQ(o.code, 2);
   EXPECT_NE(o.err.find("link.loss"), std::string::npos) << o.err;

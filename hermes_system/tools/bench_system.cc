@@ -141,15 +141,8 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
 /// under `views`.
 Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::string>& seqs,
                              const std::string& views, double duration, double rate, int n) {
-  for (const std::string& seq : seqs) {
-    if (fs::exists(fs::path(data) / seq / "mav0")) continue;
-    RenderRequest req;  // all of them in one scene
-    for (const std::string& s : seqs)
-      req.trajectories.push_back(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/" + s + ".txt");
-    req.rate_hz = rate;
-    if (Status s = hermes::renderCached(req, data); !s) return Error{s.error()};
-    break;
-  }
+  if (Status s = system::ensureWholeRenders(data, seqs, std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt", rate); !s)
+    return Error{s.error()};
   Robots robots;
   for (int k = 0; k < n; ++k) {
     const std::string& seq = seqs[k % seqs.size()];

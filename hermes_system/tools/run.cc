@@ -28,13 +28,16 @@ namespace {
 const char* kUsage =
     "usage: hermes_run --dataset DIR [--dataset DIR2 ...] --out DIR [--config FILE]\n"
     "                  [--set key=value ...] [--no-server]\n"
-    "                  [--bandwidth MBITPS | --link-trace FILE] [--max-frames N]\n"
+    "                  [--bandwidth MBITPS | --link-trace FILE | --scenario FILE] [--max-frames N]\n"
     "                  [--server-restart-at S ...] [--no-plots] [--json] [--quiet]\n"
     "Runs one agent per dataset folder (EuRoC ASL stereo or TUM RGB-D layout). With the\n"
     "server (default), all agents and the edge server run in one process on a simulated\n"
     "clock; every agent's uplink crosses ONE shared link (--bandwidth: constant rate in\n"
     "Mbit/s shared by all agents; --link-trace: CSV time_s,rate_mbitps,latency_ms,loss;\n"
-    "default: config link.* = unlimited). Writes\n"
+    "default: config link.* = unlimited). --scenario: a link per robot to the server and\n"
+    "between robots instead ('link FROM TO TRACE' per line, FROM/TO = dataset folder names\n"
+    "or server): robots out of the server's reach hand their submaps to a relay robot they\n"
+    "reach (relay.*; metrics.json then holds 'relay'). Writes\n"
     "  OUT/config_used.yaml                 every parameter actually used\n"
     "  OUT/metrics.json                     DESIGN §7 metrics (+ loop accuracy)\n"
     "  OUT/trajectories/<agent>_raw.tum     each agent's own odometry (body poses, TUM)\n"
@@ -89,7 +92,7 @@ struct Args {
   std::vector<std::string> datasets, sets;
   std::string out, config;
   bool no_server = false, json = false, help = false, plots = true, quiet = false;
-  std::string bandwidth, link_trace;
+  std::string bandwidth, link_trace, scenario;
   long max_frames = -1;
   std::vector<double> restart_at;
 };
@@ -133,6 +136,8 @@ std::string parseArgs(int argc, char** argv, Args* a) {
         return "--bandwidth '" + a->bandwidth + "' is not a positive number of Mbit/s";
     } else if (arg == "--link-trace") {
       if (!value(&a->link_trace)) return "--link-trace needs a file";
+    } else if (arg == "--scenario") {
+      if (!value(&a->scenario)) return "--scenario needs a file";
     } else if (arg == "--server-restart-at") {
       if (!value(&v)) return "--server-restart-at needs S (simulated seconds)";
       char* end = nullptr;
@@ -153,12 +158,12 @@ std::string parseArgs(int argc, char** argv, Args* a) {
   if (a->help) return "";
   if (a->datasets.empty()) return "missing --dataset DIR (see --help)";
   if (a->out.empty()) return "missing --out DIR (see --help)";
-  if (!a->bandwidth.empty() && !a->link_trace.empty())
-    return "--bandwidth and --link-trace exclude each other";
+  if (int(!a->bandwidth.empty()) + int(!a->link_trace.empty()) + int(!a->scenario.empty()) > 1)
+    return "--bandwidth, --link-trace and --scenario exclude each other";
   if (a->no_server && a->datasets.size() > 1)
     return "--no-server runs one agent: give one --dataset";
-  if (a->no_server && (!a->bandwidth.empty() || !a->link_trace.empty()))
-    return "--bandwidth/--link-trace need the server (drop --no-server)";
+  if (a->no_server && (!a->bandwidth.empty() || !a->link_trace.empty() || !a->scenario.empty()))
+    return "--bandwidth/--link-trace/--scenario need the server (drop --no-server)";
   if (a->no_server && !a->restart_at.empty())
     return "--server-restart-at needs the server (drop --no-server)";
   return "";
@@ -219,11 +224,14 @@ int main(int argc, char** argv) {
     return badInput("config file " + args.config + " does not exist");
   if (!args.link_trace.empty() && !fs::is_regular_file(args.link_trace, ec))
     return badInput("link trace " + args.link_trace + " does not exist");
+  if (!args.scenario.empty() && !fs::is_regular_file(args.scenario, ec))
+    return badInput("scenario file " + args.scenario + " does not exist");
 
   // Configuration: every module reads its keys, then nothing may be left over.
   std::vector<std::string> sets = args.sets;
   if (!args.bandwidth.empty()) sets.push_back("link.bandwidth_mbitps=" + args.bandwidth);
   if (!args.link_trace.empty()) sets.push_back("link.trace=" + args.link_trace);
+  if (!args.scenario.empty()) sets.push_back("link.scenario=" + args.scenario);
   auto config = agent::loadRunConfig(args.config, sets);
   if (!config.ok()) return badInput(config.error());
   auto params = system::readSystemParams(*config);

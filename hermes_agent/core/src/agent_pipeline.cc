@@ -135,6 +135,14 @@ Status AgentPipeline::onAck(std::uint32_t session, std::uint64_t seq, double now
   return uplink_->onAck(session, seq, now);
 }
 
+Status AgentPipeline::onHandedOver(std::uint32_t session, std::uint64_t seq, double now) {
+  std::lock_guard<std::mutex> lock(uplink_mu_);
+  if (!uplink_) return Error{"agent " + name_ + ": hop acknowledgement without an uplink"};
+  if (last_window_ && *last_window_ == std::make_pair(session, seq)) last_window_acked_ = true;
+  uplink_->onHandedOver(session, seq, now);
+  return Status::Ok();
+}
+
 void AgentPipeline::onUplinkReconnect() {
   std::lock_guard<std::mutex> lock(uplink_mu_);
   if (uplink_) uplink_->onReconnect();

@@ -1,5 +1,7 @@
 #include "hermes/agent/map_buffer.h"
 
+#include <limits>
+
 #include "hermes/core/crc32.h"
 
 #include <fcntl.h>
@@ -251,6 +253,11 @@ void MapBuffer::markSent(std::uint32_t session, std::uint64_t seq, double now) {
   if (it == pending_.end()) return;
   it->second.last_sent = now;
   ++it->second.sends;
+}
+
+void MapBuffer::hold(std::uint32_t session, std::uint64_t seq) {
+  auto it = pending_.find({session, seq});
+  if (it != pending_.end()) it->second.last_sent = std::numeric_limits<double>::infinity();
 }
 
 void MapBuffer::resetSendTimes() {

@@ -135,15 +135,37 @@ Status UplinkSender::onAck(std::uint32_t session, std::uint64_t seq, double now)
     ++stats_.acked;
   }
   in_flight_.erase(key);
+  if (auto it = handed_.find(key); it != handed_.end()) {
+    handed_bytes_ -= it->second;
+    handed_.erase(it);
+  }
   Status s = buffer_.ack(session, seq);
   poll(now);
   return s;
+}
+
+void UplinkSender::onHandedOver(std::uint32_t session, std::uint64_t seq, double now) {
+  const auto key = std::make_pair(session, seq);
+  if (auto it = send_ids_.find(key); it != send_ids_.end()) {
+    monitor_.onAck(it->second, now);
+    send_ids_.erase(it);
+  }
+  in_flight_.erase(key);
+  const BufferedSubmap* b = buffer_.find(session, seq);
+  if (b && handed_.count(key) == 0) {
+    handed_[key] = b->frame.size();
+    handed_bytes_ += b->frame.size();
+    buffer_.hold(session, seq);
+  }
+  poll(now);
 }
 
 void UplinkSender::onReconnect() {
   for (const auto& [key, id] : send_ids_) monitor_.onGiveUp(id);
   send_ids_.clear();
   in_flight_.clear();
+  handed_.clear();
+  handed_bytes_ = 0;
   buffer_.resetSendTimes();
 }
 

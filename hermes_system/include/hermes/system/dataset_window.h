@@ -7,6 +7,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "hermes/core/status.h"
 
@@ -23,5 +24,11 @@ struct WindowInfo {
 /// no frame.
 Expected<WindowInfo> writeEurocWindow(const std::string& source, double start_s, double duration_s,
                                       const std::string& out);
+
+/// Makes sure `data` holds whole-sequence renders of every one of `sequences`
+/// (<data>/<sequence>/mav0): if one is missing, renders all of them in one
+/// scene from `trajectories_dir`/<sequence>.txt at `rate_hz` (render_cache.h).
+Status ensureWholeRenders(const std::string& data, const std::vector<std::string>& sequences,
+                          const std::string& trajectories_dir, double rate_hz);
 
 }  // namespace hermes::system

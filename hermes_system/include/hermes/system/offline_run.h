@@ -12,6 +12,10 @@
 //   every server_period_s: Server::process (credibility order, merge, loops, graph)
 // After the last frame the link runs on for at most drain_s so the backlog arrives.
 //
+// Scenario runs (link.scenario, scenario.h): instead of the one shared link, a
+// link per robot to the server and between robots (RelayNetwork): robots out of
+// the server's reach hand their submaps to a relay robot (relay.*).
+//
 // Server restarts (system.server_restart_at): at each time the server object is
 // destroyed as in a crash (no clean checkpoint), frames arriving while it is
 // down are lost (never acknowledged), and server_downtime_s later it is created
@@ -34,6 +38,7 @@
 #include "hermes/core/bandwidth_log.h"
 #include "hermes/core/dataset.h"
 #include "hermes/core/emulated_link.h"
+#include "hermes/system/relay_network.h"
 #include "hermes/system/system_params.h"
 
 namespace hermes::system {
@@ -103,7 +108,10 @@ class OfflineRun {
   /// Applies `setup` to the server now and to every server created again after a restart.
   void onServerCreated(std::function<void(server::Server&)> setup);
   const std::vector<ServerRestart>& restarts() const { return restarts_; }
+  /// The shared link (runs without a scenario; unused with one).
   const SharedLink& link() const { return *link_; }
+  /// The scenario's network (null without link.scenario).
+  const RelayNetwork* network() const { return network_.get(); }
   const std::vector<BandwidthSample>& bandwidth() const { return bandwidth_; }
   /// Per agent: (sim time, bandwidth estimate [B/s]) at each bandwidth sample.
   const std::map<std::string, std::vector<std::pair<double, double>>>& estimates() const {
@@ -118,7 +126,12 @@ class OfflineRun {
   OfflineRun(SystemParams params, std::unique_ptr<server::Server> server);
   Status feedDueFrames(double t);
   void deliver(double t);
+  /// A submap of agent `i` reached the server at `arrival`: whether it is acknowledged.
+  bool receive(std::size_t i, std::uint32_t session, std::uint64_t seq,
+               const std::vector<std::uint8_t>& bytes, double arrival);
   void acknowledge(double t);
+  /// Builds the scenario's network (link.scenario) and its hooks.
+  Status createNetwork(const std::string& spool_root);
   void sample(double t);
   /// Destroys / re-creates the server at the configured restart times.
   Status restartServer(double t);
@@ -147,6 +160,8 @@ class OfflineRun {
 
   SystemParams params_;
   std::unique_ptr<SharedLink> link_;
+  std::unique_ptr<RelayNetwork> network_;
+  std::vector<double> last_own_bytes_;  ///< scenario runs: per agent, at the last sample
   std::unique_ptr<server::Server> server_;
   std::vector<OfflineAgent> agents_;
   std::map<std::uint64_t, MessageKey> messages_;  ///< link message id -> submap

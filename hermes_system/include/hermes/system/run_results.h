@@ -24,6 +24,7 @@
 #include "hermes/core/metrics.h"
 #include "hermes/system/durability_report.h"
 #include "hermes/system/offline_run.h"
+#include "hermes/system/relay_report.h"
 
 namespace hermes::system {
 
@@ -42,6 +43,7 @@ struct RunResults {
   std::map<std::string, std::size_t> loops_per_pair;  ///< "a-b" -> accepted loops
   std::vector<std::string> warnings;                  ///< e.g. an agent that could not be evaluated
   std::optional<DurabilitySummary> durability;        ///< with a server checkpoint directory
+  std::optional<RelaySummary> relay;                  ///< with a scenario (link.scenario)
 };
 
 /// Evaluates the finished run and fills the metrics (no files).

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "hermes/agent/odometry_corruption.h"
+#include "hermes/agent/relay_split.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/core/config.h"
 #include "hermes/core/link_trace.h"
@@ -24,6 +25,10 @@ struct LinkParams {
   double latency_ms = 20;        ///< [ms] one-way latency (constant links)
   double loss = 0;               ///< message loss probability in [0, 1) (constant links)
   std::string trace;             ///< CSV trace file (link_trace.h); overrides the three above
+  /// Scenario file (scenario.h): a link per robot to the server and between
+  /// robots, instead of the one shared link; overrides everything above but
+  /// packet_bytes and seed.
+  std::string scenario;
   int packet_bytes = 1500;       ///< [B] round-robin service unit between agents
   int seed = 1;                  ///< loss draws
 
@@ -55,6 +60,7 @@ struct SystemParams {
   agent::RunParams run;           ///< agent pipeline, dataset, eval
   server::ServerParams server;    ///< section server
   LinkParams link;                ///< section link
+  agent::RelayParams relay;       ///< section relay (scenario runs)
   ClockParams clock;              ///< section system
   agent::OdometryCorruptionParams corrupt;  ///< section corrupt (test hook)
   /// Keys transport, mqtt: read by the ROS nodes; checked here, unused by the

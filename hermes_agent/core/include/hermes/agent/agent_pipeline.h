@@ -120,6 +120,10 @@ class AgentPipeline {
   }
   /// Server acknowledgement at uplink time `now` (duplicates are fine).
   Status onAck(std::uint32_t session, std::uint64_t seq, double now);
+  /// A relay robot holds the submap durably (UplinkSender::onHandedOver): counts
+  /// as delivered for the monitor and the probing rule; the spool keeps it until
+  /// the server's acknowledgement comes back through the relay (onAck).
+  Status onHandedOver(std::uint32_t session, std::uint64_t seq, double now);
   /// Lets the uplink send what it may at uplink time `now` (feed() also does).
   void pollUplink(double now);
   /// The transport lost what was in flight (e.g. an MQTT broker that forgot our

@@ -65,6 +65,14 @@ class MapBuffer {
   /// expired at time `now`; nullptr if none. Order: (session, seq).
   BufferedSubmap* nextToSend(double now);
   void markSent(std::uint32_t session, std::uint64_t seq, double now);
+  /// The pending submap (session, seq), or nullptr.
+  const BufferedSubmap* find(std::uint32_t session, std::uint64_t seq) const {
+    auto it = pending_.find({session, seq});
+    return it == pending_.end() ? nullptr : &it->second;
+  }
+  /// Keeps a pending submap from being sent again until resetSendTimes() (a relay
+  /// holds it durably and forwards it; its acknowledgement frees it as usual).
+  void hold(std::uint32_t session, std::uint64_t seq);
   /// Makes every pending submap eligible for sending again (after a reconnect).
   void resetSendTimes();
 

@@ -62,6 +62,12 @@ class UplinkSender {
   void poll(double now);
   /// Acknowledgement from the server (duplicates and unknown keys are fine).
   Status onAck(std::uint32_t session, std::uint64_t seq, double now);
+  /// A relay robot took the submap into its durable spool (hop acknowledgement,
+  /// relay_spool.h): the monitor measures the link to the relay with it, the
+  /// submap no longer counts as this robot's backlog and is not sent again on a
+  /// timeout (only after onReconnect), but it stays in the spool until the
+  /// server's acknowledgement comes back through the relay (onAck).
+  void onHandedOver(std::uint32_t session, std::uint64_t seq, double now);
   /// The link came back / the server restarted: resend everything unacked.
   void onReconnect();
 
@@ -69,8 +75,11 @@ class UplinkSender {
   const MapBuffer& buffer() const { return buffer_; }
   MapBuffer& buffer() { return buffer_; }
   const UplinkStats& stats() const { return stats_; }
-  /// Unacknowledged bytes (buffered, sent or not): the coordinator's backlog.
-  std::size_t backlogBytes() const { return buffer_.pendingBytes(); }
+  /// Unacknowledged bytes (buffered, sent or not) not handed over to a relay:
+  /// the coordinator's backlog.
+  std::size_t backlogBytes() const { return buffer_.pendingBytes() - handed_bytes_; }
+  /// Submaps a relay holds for this robot, waiting for the server's acknowledgement.
+  std::size_t handedOverCount() const { return handed_.size(); }
 
  private:
   UplinkSender(UplinkParams p, MapBuffer buffer, Transport transport,
@@ -86,6 +95,8 @@ class UplinkSender {
   std::map<std::pair<std::uint32_t, std::uint64_t>, std::uint64_t> send_ids_;
   std::map<std::pair<std::uint32_t, std::uint64_t>, std::size_t> in_flight_;
   std::uint64_t next_send_id_ = 0;
+  std::map<std::pair<std::uint32_t, std::uint64_t>, std::size_t> handed_;  ///< to a relay: bytes
+  std::size_t handed_bytes_ = 0;
   UplinkStats stats_;
 };
 
