@@ -27,6 +27,8 @@ class RayGrid {
 
   int width() const { return w_; }
   int height() const { return h_; }
+  /// Camera-frame ray (x, y, 1) of pixel (u, v).
+  const Eigen::Vector3f& ray(int u, int v) const { return ray_[static_cast<std::size_t>(v) * w_ + u]; }
 
   static constexpr int kTile = 16;
   struct Tile {
