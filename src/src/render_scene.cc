@@ -26,6 +26,9 @@ Status SceneParams::validate() const {
   if (dark_zones < 1 || dark_zones > 50) return Error{"scene: dark_zones must be in [1, 50]"};
   if (!(dark_radius_m > 0 && dark_radius_m <= 100)) return Error{"scene: dark_radius_m must be in (0, 100]"};
   if (!(dark_level >= 0 && dark_level <= 1)) return Error{"scene: dark_level must be in [0, 1]"};
+  if (!(grain_sigma >= 0 && grain_sigma <= 50)) return Error{"scene: grain_sigma must be in [0, 50]"};
+  if (!(grain_scale_texels >= 0.3 && grain_scale_texels <= 20))
+    return Error{"scene: grain_scale_texels must be in [0.3, 20]"};
   if (aliasing_copies < 1 || aliasing_copies > 50) return Error{"scene: aliasing_copies must be in [1, 50]"};
   return Status::Ok();
 }
@@ -40,6 +43,8 @@ Status SceneParams::read(const Config& c, const std::string& prefix) {
                     c.get(prefix + ".poor_walls", &poor_walls), c.get(prefix + ".photo_folder", &photo_folder),
                     c.get(prefix + ".dark_regions", &dark_regions), c.get(prefix + ".dark_zones", &dark_zones),
                     c.get(prefix + ".dark_radius_m", &dark_radius_m), c.get(prefix + ".dark_level", &dark_level),
+                    c.get(prefix + ".grain", &grain), c.get(prefix + ".grain_sigma", &grain_sigma),
+                    c.get(prefix + ".grain_scale_texels", &grain_scale_texels),
                     c.get(prefix + ".aliasing", &aliasing), c.get(prefix + ".aliasing_copies", &aliasing_copies)})
     if (!st) return st;
   if (seed_i < 0) return Error{prefix + ".seed must be >= 0 (" + c.origin() + ")"};
@@ -63,6 +68,9 @@ void SceneParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(prefix + ".dark_zones", dark_zones);
   w->set(prefix + ".dark_radius_m", dark_radius_m);
   w->set(prefix + ".dark_level", dark_level);
+  w->set(prefix + ".grain", grain);
+  w->set(prefix + ".grain_sigma", grain_sigma);
+  w->set(prefix + ".grain_scale_texels", grain_scale_texels);
   w->set(prefix + ".aliasing", aliasing);
   w->set(prefix + ".aliasing_copies", aliasing_copies);
 }
@@ -205,6 +213,7 @@ Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const Scen
   for (SceneBox& b : s.objects) texturize(b, p.poor_walls && rng.uniform(0, 5) == 0, false);
   // The effects draw from their own random streams: without them the scene is
   // exactly the one built before they existed.
+  if (p.grain) addGrain(p, &s);  // before the copies, so they repeat the grain too
   if (p.aliasing) addAliasingCopies(p, pts, &s);
   if (p.dark_regions) addDarkZones(p, pts, &s);
   return s;

@@ -1,4 +1,5 @@
-// Scene effects: aliasing copies of objects and dark zones baked into textures.
+// Scene effects: surface grain, aliasing copies of objects and dark zones
+// baked into textures.
 #include "render_scene_effects.h"
 
 #include <algorithm>
@@ -10,6 +11,23 @@
 
 namespace hermes {
 namespace render {
+
+void addGrain(const SceneParams& p, Scene* s) {
+  for (std::size_t t = 0; t < s->textures.size(); ++t) {
+    const cv::Mat base = s->textures[t].levels[0];
+    cv::Mat noise(base.size(), CV_32F);
+    cv::RNG rng(mixSeed(p.seed, 0x9a1000 + t));
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+    cv::GaussianBlur(noise, noise, cv::Size(0, 0), p.grain_scale_texels);
+    cv::Scalar mean, sd;
+    cv::meanStdDev(noise, mean, sd);
+    cv::Mat out;
+    base.convertTo(out, CV_32F);
+    out += noise * (sd[0] > 1e-6 ? p.grain_sigma / sd[0] : 0.0);
+    out.convertTo(out, CV_8U);  // saturating
+    s->textures[t] = MipTexture::fromImage(out);
+  }
+}
 
 void addAliasingCopies(const SceneParams& p, const std::vector<Vec3>& pts, Scene* s) {
   std::vector<int> sources;

@@ -1,5 +1,6 @@
 // Optional scene effects of the synthetic renderer (internal to buildScene):
-// perceptual aliasing (exact copies of objects elsewhere) and dark regions.
+// surface grain, perceptual aliasing (exact copies of objects elsewhere) and
+// dark regions.
 #pragma once
 
 #include <vector>
@@ -13,6 +14,10 @@ namespace render {
 bool overlaps(const SceneBox& a, const SceneBox& b, double gap);
 /// Whether b overlaps no object of s and keeps clearance_m to every point.
 bool placeable(const Scene& s, const SceneBox& b, const std::vector<Vec3>& pts, double clearance_m);
+
+/// Adds fine Gaussian grain (p.grain_sigma, correlated over
+/// p.grain_scale_texels) to every texture; deterministic per texture.
+void addGrain(const SceneParams& p, Scene* s);
 
 /// Appends up to p.aliasing_copies copies of textured objects (same size and
 /// texture content, own texture entries) at free places of the hall.

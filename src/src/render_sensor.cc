@@ -20,6 +20,7 @@ double unit(std::uint64_t h) { return static_cast<double>(h >> 11) * (1.0 / 9007
 
 Status SensorParams::read(const Config& c, const std::string& prefix) {
   for (Status st : {c.get(prefix + ".noise_sigma", &noise_sigma), c.get(prefix + ".vignetting", &vignetting),
+                    c.get(prefix + ".brightness", &brightness),
                     c.get(prefix + ".drift_amplitude", &drift_amplitude),
                     c.get(prefix + ".step_amplitude", &step_amplitude),
                     c.get(prefix + ".step_period_s", &step_period_s),
@@ -34,6 +35,7 @@ Status SensorParams::read(const Config& c, const std::string& prefix) {
 
 Status SensorParams::validate() const {
   if (!(noise_sigma >= 0 && noise_sigma < 50)) return Error{"sensor: noise_sigma must be in [0, 50)"};
+  if (!(brightness > 0.05 && brightness <= 20)) return Error{"sensor: brightness must be in (0.05, 20]"};
   if (!(vignetting >= 0 && vignetting < 1)) return Error{"sensor: vignetting must be in [0, 1)"};
   if (!(drift_amplitude >= 0 && drift_amplitude < 1)) return Error{"sensor: drift_amplitude must be in [0, 1)"};
   if (!(step_amplitude >= 0 && step_amplitude < 1)) return Error{"sensor: step_amplitude must be in [0, 1)"};
@@ -48,6 +50,7 @@ Status SensorParams::validate() const {
 
 void SensorParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(prefix + ".noise_sigma", noise_sigma);
+  w->set(prefix + ".brightness", brightness);
   w->set(prefix + ".vignetting", vignetting);
   w->set(prefix + ".drift_amplitude", drift_amplitude);
   w->set(prefix + ".step_amplitude", step_amplitude);
@@ -100,7 +103,7 @@ double Sensor::gain(double t) const {
   const double a = std::clamp(since / 0.5, 0.0, 1.0);  // 0.5 s auto-exposure transition
   const double s = a * a * (3 - 2 * a);
   const double step = (1 - s) * stepLevel(k - 1) + s * stepLevel(k);
-  return std::exp(drift + step);
+  return p_.brightness * std::exp(drift + step);
 }
 
 cv::Mat Sensor::expose(const cv::Mat& radiance, double t, int cam) const {

@@ -164,6 +164,34 @@ Expected<Stats> renderedStats(const Trajectory& traj, const render::RenderSettin
   return s;
 }
 
+/// Motion blur along a trajectory (cam0, `frames` frames spread over it): the
+/// per-frame mean smear and the longest one [px].
+Expected<nlohmann::json> blurAlong(const std::string& path, const render::SensorParams& sensor, int frames) {
+  auto traj = readTumTrajectory(path);
+  if (!traj.ok()) return Error{traj.error()};
+  if (traj->size() < 2) return Error{path + ": fewer than 2 poses"};
+  const PinholeRadtan cam = render::eurocCam0();
+  std::vector<Vec3> pos;
+  render::appendRigPositions(*traj, {cam.T_B_C}, &pos);
+  auto scene = render::buildScene(pos, render::SceneParams{});
+  if (!scene.ok()) return Error{scene.error()};
+  render::Raycaster rc(*scene, render::RayGrid::fromRadtan(cam));
+  render::RenderOutput ro;
+  cv::Mat blurred;
+  std::vector<double> mean_px, max_px;
+  const double t0 = traj->front().t + 1.0, span = traj->back().t - traj->front().t - 2.0;
+  for (int k = 0; k < frames; ++k) {
+    render::BlurStats b;
+    render::renderExposure(rc, cam.K, *traj, cam.T_B_C, t0 + span * k / (frames - 1), sensor, false, &ro, &blurred, &b);
+    mean_px.push_back(b.mean_px);
+    max_px.push_back(b.max_px);
+  }
+  return nlohmann::json{{"frames", frames}, {"exposure_s", sensor.exposure_s},
+                        {"mean_px", {{"median", quantile(mean_px, 0.5)}, {"p90", quantile(mean_px, 0.9)},
+                                     {"max", quantile(mean_px, 1)}}},
+                        {"longest_px", quantile(max_px, 1)}};
+}
+
 struct Row {
   std::string name, unit;
   const std::vector<double> Stats::*field;
@@ -224,14 +252,32 @@ int main(int argc, char** argv) {
   }
   const std::vector<double> ref = pooled(r->grad_hist);
   finish(ref, &*r);
-  auto d = renderedStats(*traj, render::RenderSettings{}, frames, fast_threshold, "default");
-  auto x = d.ok() ? renderedStats(*traj, *realistic, frames, fast_threshold, "realistic") : d;
-  if (!d.ok() || !x.ok()) {
-    std::fprintf(stderr, "hermes_bench_realism: %s\n", (d.ok() ? x : d).error().c_str());
-    return 1;
+  // Variants: the default look, the realism preset (with --set overrides) and
+  // the preset without dark regions (the real V1_01 room is lit throughout).
+  auto lit_sets = sets;
+  lit_sets.push_back("render.scene.dark_regions=false");
+  auto lit = render::readRenderSettings(Config(), lit_sets);
+  if (!lit.ok()) {
+    std::fprintf(stderr, "hermes_bench_realism: %s\n", lit.error().c_str());
+    return 2;
   }
-  finish(ref, &*d);
-  finish(ref, &*x);
+  struct Variant {
+    std::string name;
+    render::RenderSettings settings;
+    Stats stats;
+  };
+  std::vector<Variant> variants = {{"rendered_default", render::RenderSettings{}, {}},
+                                   {"rendered_realistic", *realistic, {}},
+                                   {"rendered_realistic_lit", *lit, {}}};
+  for (Variant& v : variants) {
+    auto st = renderedStats(*traj, v.settings, frames, fast_threshold, v.name);
+    if (!st.ok()) {
+      std::fprintf(stderr, "hermes_bench_realism: %s\n", st.error().c_str());
+      return 1;
+    }
+    v.stats = std::move(*st);
+    finish(ref, &v.stats);
+  }
 
   const std::vector<Row> rows = {
       {"noise_sigma", "grey levels (static pairs)", &Stats::noise_sigma},
@@ -249,8 +295,10 @@ int main(int argc, char** argv) {
   j["unit"] = "quarter frame (376x240); noise: per static frame pair";
   j["inside_rule"] = "rendered median within the real [min, max]";
   j["realistic_settings"] = sets;
-  std::fprintf(stderr, "\n%-24s %-30s | %-8s %-8s %-8s | %-16s | %-16s\n", "statistic", "unit", "real min",
-               "real med", "real max", "default med (in)", "realistic med (in)");
+  j["realistic_lit_settings"] = lit_sets;
+  std::fprintf(stderr, "\n%-23s %-27s | %-8s %-8s %-8s |", "statistic", "unit", "real min", "real med", "real max");
+  for (const Variant& v : variants) std::fprintf(stderr, " %-22s |", (v.name.substr(9) + " med (in)").c_str());
+  std::fprintf(stderr, "\n");
   int inside_realistic = 0;
   for (const Row& row : rows) {
     const std::vector<double>& rv = (*r).*row.field;
@@ -259,44 +307,62 @@ int main(int argc, char** argv) {
     e["unit"] = row.unit;
     e["real"] = {{"min", lo}, {"p05", quantile(rv, 0.05)}, {"median", quantile(rv, 0.5)},
                  {"p95", quantile(rv, 0.95)}, {"max", hi}, {"n", rv.size()}};
-    std::string cells[2];
-    const Stats* variants[2] = {&*d, &*x};
-    const char* names[2] = {"rendered_default", "rendered_realistic"};
-    for (int v = 0; v < 2; ++v) {
-      const std::vector<double>& vv = variants[v]->*row.field;
+    std::fprintf(stderr, "%-23s %-27s | %8.3g %8.3g %8.3g |", row.name.c_str(), row.unit.c_str(), lo,
+                 quantile(rv, 0.5), hi);
+    for (const Variant& v : variants) {
+      const std::vector<double>& vv = v.stats.*row.field;
       const double med = quantile(vv, 0.5);
       const bool in = med >= lo && med <= hi;
       int units_in = 0;
       for (double y : vv) units_in += y >= lo && y <= hi;
-      e[names[v]] = {{"min", quantile(vv, 0)}, {"median", med}, {"max", quantile(vv, 1)}, {"n", vv.size()},
-                     {"inside_real_spread", in}, {"fraction_of_units_inside", vv.empty() ? 0.0 : double(units_in) / vv.size()}};
-      char buf[64];
-      std::snprintf(buf, sizeof buf, "%8.3g (%s)", med, in ? "yes" : "NO");
-      cells[v] = buf;
-      if (v == 1) inside_realistic += in;
+      e[v.name] = {{"min", quantile(vv, 0)}, {"median", med}, {"max", quantile(vv, 1)}, {"n", vv.size()},
+                   {"inside_real_spread", in},
+                   {"fraction_of_units_inside", vv.empty() ? 0.0 : double(units_in) / vv.size()}};
+      std::fprintf(stderr, " %8.3g (%-3s)%8s |", med, in ? "yes" : "NO", "");
+      if (v.name == "rendered_realistic") inside_realistic += in;
     }
+    std::fprintf(stderr, "\n");
     j["stats"][row.name] = e;
-    std::fprintf(stderr, "%-24s %-30s | %8.3g %8.3g %8.3g | %-16s | %-16s\n", row.name.c_str(), row.unit.c_str(), lo,
-                 quantile(rv, 0.5), hi, cells[0].c_str(), cells[1].c_str());
   }
   auto fit = [](const Stats& s) {
     return nlohmann::json{{"sigma", s.noise.sigma}, {"read_var", s.noise.read_var},
                           {"photon_gain", s.noise.photon_gain}, {"pixels", s.noise.pixels},
                           {"bin_centre", s.noise.bin_centre}, {"bin_sigma", s.noise.bin_sigma}};
   };
-  j["noise_fit"] = {{"real", fit(*r)}, {"rendered_default", fit(*d)}, {"rendered_realistic", fit(*x)}};
-  j["fast_response_ks_to_real"] = {{"rendered_default", ksDistance(d->responses, r->responses)},
-                                   {"rendered_realistic", ksDistance(x->responses, r->responses)}};
-  j["motion_blur_mean_px"] = {{"rendered_default", d->blur_mean_px}, {"rendered_realistic", x->blur_mean_px}};
+  j["gradient_hist_pooled"]["bin_width"] = 2.0;
+  j["gradient_hist_pooled"]["real"] = ref;
+  j["noise_fit"]["real"] = fit(*r);
+  std::fprintf(stderr, "noise fit sigma^2 = read + gain*I: real %.3f + %.4f I", r->noise.read_var, r->noise.photon_gain);
+  for (const Variant& v : variants) {
+    j["gradient_hist_pooled"][v.name] = pooled(v.stats.grad_hist);
+    j["noise_fit"][v.name] = fit(v.stats);
+    j["fast_response_ks_to_real"][v.name] = ksDistance(v.stats.responses, r->responses);
+    j["motion_blur_mean_px"][v.name] = v.stats.blur_mean_px;
+    std::fprintf(stderr, " | %s %.3f + %.4f I", v.name.substr(9).c_str(), v.stats.noise.read_var,
+                 v.stats.noise.photon_gain);
+  }
+  std::fprintf(stderr, "\nFAST response KS distance to real:");
+  for (const Variant& v : variants)
+    std::fprintf(stderr, " %s %.3f", v.name.substr(9).c_str(), j["fast_response_ks_to_real"][v.name].get<double>());
+  std::fprintf(stderr, "; realistic inside %d / %zu\n", inside_realistic, rows.size());
   j["realistic_inside"] = inside_realistic;
+  if (realistic->sensor.motion_blur) {
+    for (const char* stem : {"V1_01_easy", "V1_03_difficult", "MH_01_easy", "MH_04_difficult", "MH_05_difficult"}) {
+      const std::string path = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/" + stem + ".txt";
+      if (!fs::exists(path)) continue;
+      auto b = blurAlong(path, realistic->sensor, 30);
+      if (!b.ok()) {
+        std::fprintf(stderr, "hermes_bench_realism: %s\n", b.error().c_str());
+        return 1;
+      }
+      j["motion_blur_along"][stem] = *b;
+      std::fprintf(stderr, "motion blur %-16s: per-frame mean smear median %.2f px, p90 %.2f px; longest %.1f px\n",
+                   stem, (*b)["mean_px"]["median"].get<double>(), (*b)["mean_px"]["p90"].get<double>(),
+                   (*b)["longest_px"].get<double>());
+    }
+  }
   j["stats_count"] = rows.size();
   j["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
-  std::fprintf(stderr, "noise fit sigma^2 = read + gain*I: real read %.3f gain %.4f | default %.3f %.4f | realistic %.3f %.4f\n",
-               r->noise.read_var, r->noise.photon_gain, d->noise.read_var, d->noise.photon_gain, x->noise.read_var,
-               x->noise.photon_gain);
-  std::fprintf(stderr, "FAST response KS distance to real: default %.3f, realistic %.3f; realistic inside %d / %zu\n",
-               ksDistance(d->responses, r->responses), ksDistance(x->responses, r->responses), inside_realistic,
-               rows.size());
   const std::string out = j.dump(2);
   std::puts(out.c_str());
   if (!json_out.empty()) {

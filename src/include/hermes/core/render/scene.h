@@ -64,6 +64,11 @@ struct SceneParams {
   int dark_zones = 3;               ///< number of zones
   double dark_radius_m = 6.0;       ///< zone radius [m]
   double dark_level = 0.25;         ///< brightness left at a zone's centre (0..1)
+  /// Surface grain: fine correlated noise added to every texture (real
+  /// surfaces are never uniform; the gradient histogram of real frames shows it).
+  bool grain = false;
+  double grain_sigma = 3.0;         ///< standard deviation [grey levels]
+  double grain_scale_texels = 1.5;  ///< correlation length [texels]
   /// Perceptual aliasing: exact copies (shape + texture) of textured objects
   /// placed elsewhere in the hall.
   bool aliasing = false;

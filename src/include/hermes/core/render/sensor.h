@@ -17,6 +17,7 @@ namespace render {
 
 struct SensorParams {
   double noise_sigma = 2.0;       ///< Gaussian read noise [grey levels]
+  double brightness = 1.0;        ///< constant exposure gain on top of the drift
   double vignetting = 0.25;       ///< brightness loss at the image corner (0 = none)
   double drift_amplitude = 0.15;  ///< log-gain amplitude of the smooth drift
   double step_amplitude = 0.22;   ///< max |log-gain| of an exposure step
