@@ -55,8 +55,19 @@ BlurStats motionBlur(const cv::Mat& radiance, const cv::Mat& depth, const RayGri
         dst[u] = src[u];
         continue;
       }
-      const float du = fx * (Xe.x() / Xe.z() - Xs.x() / Xs.z());
-      const float dv = fy * (Xe.y() / Xe.z() - Xs.y() / Xs.z());
+      // Normalised motion -> pixels through the local Jacobian of the ray grid
+      // (central differences: the lens distortion shrinks motion at the border).
+      const float nx = Xe.x() / Xe.z() - Xs.x() / Xs.z(), ny = Xe.y() / Xe.z() - Xs.y() / Xs.z();
+      const int ul = std::max(u - 1, 0), ur = std::min(u + 1, radiance.cols - 1);
+      const int vt = std::max(v - 1, 0), vb = std::min(v + 1, radiance.rows - 1);
+      const Eigen::Vector3f ju = (rays.ray(ur, v) - rays.ray(ul, v)) / static_cast<float>(ur - ul);
+      const Eigen::Vector3f jv = (rays.ray(u, vb) - rays.ray(u, vt)) / static_cast<float>(vb - vt);
+      const float det = ju.x() * jv.y() - jv.x() * ju.y();
+      float du = fx * nx, dv = fy * ny;  // pinhole fallback
+      if (std::abs(det) > 1e-12f) {
+        du = (jv.y() * nx - jv.x() * ny) / det;
+        dv = (-ju.y() * nx + ju.x() * ny) / det;
+      }
       const float len = std::sqrt(du * du + dv * dv);
       sum_len += len;
       max_len = std::max(max_len, static_cast<double>(len));

@@ -33,8 +33,9 @@ struct BlurStats {
 };
 
 /// Smears `radiance` (CV_32F) along each pixel's motion; `depth` is the z-depth
-/// (CV_32F) of the same render, `rays` its ray grid, `K` gives the focal lengths
-/// that turn normalised motion into pixels. At most `max_taps` samples per pixel;
+/// (CV_32F) of the same render, `rays` its ray grid: normalised motion becomes
+/// pixels through the grid's local Jacobian (so the lens distortion counts);
+/// `K`'s focal lengths serve only where that Jacobian is degenerate. At most `max_taps` samples per pixel;
 /// pixels that move less than a quarter pixel are copied. `out` may not alias.
 BlurStats motionBlur(const cv::Mat& radiance, const cv::Mat& depth, const RayGrid& rays,
                      const PinholeIntrinsics& K, const ExposureMotion& motion, int max_taps, cv::Mat* out);
