@@ -20,6 +20,15 @@ ExposureMotion exposureMotion(const Trajectory& traj, const SE3& T_B_C, double t
 
 namespace {
 
+/// Bilinear sample of a CV_32F image at (x, y) in [0, cols - 1) x [0, rows - 1).
+inline float bilinearInside(const cv::Mat& img, float x, float y) {
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const float a = x - x0, b = y - y0;
+  const float* r0 = img.ptr<float>(y0) + x0;
+  const float* r1 = img.ptr<float>(y0 + 1) + x0;
+  return (1 - b) * (r0[0] + a * (r0[1] - r0[0])) + b * (r1[0] + a * (r1[1] - r1[0]));
+}
+
 /// Bilinear sample of a CV_32F image, coordinates clamped to the image.
 inline float bilinear(const cv::Mat& img, float x, float y) {
   x = std::clamp(x, 0.0f, static_cast<float>(img.cols - 1));
@@ -55,19 +64,12 @@ BlurStats motionBlur(const cv::Mat& radiance, const cv::Mat& depth, const RayGri
         dst[u] = src[u];
         continue;
       }
-      // Normalised motion -> pixels through the local Jacobian of the ray grid
-      // (central differences: the lens distortion shrinks motion at the border).
+      // Normalised motion -> pixels through the ray grid's local Jacobian (the
+      // lens distortion shrinks motion towards the border).
       const float nx = Xe.x() / Xe.z() - Xs.x() / Xs.z(), ny = Xe.y() / Xe.z() - Xs.y() / Xs.z();
-      const int ul = std::max(u - 1, 0), ur = std::min(u + 1, radiance.cols - 1);
-      const int vt = std::max(v - 1, 0), vb = std::min(v + 1, radiance.rows - 1);
-      const Eigen::Vector3f ju = (rays.ray(ur, v) - rays.ray(ul, v)) / static_cast<float>(ur - ul);
-      const Eigen::Vector3f jv = (rays.ray(u, vb) - rays.ray(u, vt)) / static_cast<float>(vb - vt);
-      const float det = ju.x() * jv.y() - jv.x() * ju.y();
-      float du = fx * nx, dv = fy * ny;  // pinhole fallback
-      if (std::abs(det) > 1e-12f) {
-        du = (jv.y() * nx - jv.x() * ny) / det;
-        dv = (-ju.y() * nx + ju.x() * ny) / det;
-      }
+      const Eigen::Vector4f& J = rays.pixelsPerNormalised(u, v);
+      float du = J[0] * nx + J[1] * ny, dv = J[2] * nx + J[3] * ny;
+      if (J.isZero()) du = fx * nx, dv = fy * ny;  // degenerate grid: pinhole
       const float len = std::sqrt(du * du + dv * dv);
       sum_len += len;
       max_len = std::max(max_len, static_cast<double>(len));
@@ -77,10 +79,13 @@ BlurStats motionBlur(const cv::Mat& radiance, const cv::Mat& depth, const RayGri
       }
       // Taps about one pixel apart, centred on the pixel (mid-exposure).
       const int n = std::min(max_taps, static_cast<int>(std::ceil(len)) + 1);
+      const float hu = 0.5f * std::abs(du), hv = 0.5f * std::abs(dv);
+      const bool inside = u - hu >= 0 && v - hv >= 0 && u + hu < radiance.cols - 1 && v + hv < radiance.rows - 1;
       float acc = 0;
       for (int k = 0; k < n; ++k) {
         const float tau = (k + 0.5f) / n - 0.5f;
-        acc += bilinear(radiance, u + tau * du, v + tau * dv);
+        const float x = u + tau * du, y = v + tau * dv;
+        acc += inside ? bilinearInside(radiance, x, y) : bilinear(radiance, x, y);
       }
       dst[u] = acc / n;
     }
