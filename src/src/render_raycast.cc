@@ -155,6 +155,16 @@ Raycaster::Raycaster(const Scene& scene, RayGrid rays) : scene_(scene), rays_(st
   }
 }
 
+void Raycaster::placeMovers(double t) {
+  for (const MovingObject& m : scene_.movers) {
+    const SceneBox& b = scene_.objects[m.object];
+    const Vec3 off = m.offsetAt(t);
+    lo_[m.object] = (b.lo + off).cast<float>();
+    hi_[m.object] = (b.hi + off).cast<float>();
+    centre_[m.object] = (0.5 * (b.lo + b.hi) + off).cast<float>();
+  }
+}
+
 void Raycaster::castRay(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float /*range_scale*/,
                         const int* cand, int ncand, Hit* hit) const {
   Eigen::Vector3f inv;

@@ -29,6 +29,8 @@ Status SceneParams::validate() const {
   if (!(grain_sigma >= 0 && grain_sigma <= 50)) return Error{"scene: grain_sigma must be in [0, 50]"};
   if (!(grain_scale_texels >= 0.3 && grain_scale_texels <= 20))
     return Error{"scene: grain_scale_texels must be in [0.3, 20]"};
+  if (moving_objects < 0 || moving_objects > 20) return Error{"scene: moving_objects must be in [0, 20]"};
+  if (!(moving_speed_mps > 0 && moving_speed_mps <= 20)) return Error{"scene: moving_speed_mps must be in (0, 20]"};
   if (aliasing_copies < 1 || aliasing_copies > 50) return Error{"scene: aliasing_copies must be in [1, 50]"};
   return Status::Ok();
 }
@@ -45,6 +47,8 @@ Status SceneParams::read(const Config& c, const std::string& prefix) {
                     c.get(prefix + ".dark_radius_m", &dark_radius_m), c.get(prefix + ".dark_level", &dark_level),
                     c.get(prefix + ".grain", &grain), c.get(prefix + ".grain_sigma", &grain_sigma),
                     c.get(prefix + ".grain_scale_texels", &grain_scale_texels),
+                    c.get(prefix + ".moving_objects", &moving_objects),
+                    c.get(prefix + ".moving_speed_mps", &moving_speed_mps),
                     c.get(prefix + ".aliasing", &aliasing), c.get(prefix + ".aliasing_copies", &aliasing_copies)})
     if (!st) return st;
   if (seed_i < 0) return Error{prefix + ".seed must be >= 0 (" + c.origin() + ")"};
@@ -71,6 +75,8 @@ void SceneParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(prefix + ".grain", grain);
   w->set(prefix + ".grain_sigma", grain_sigma);
   w->set(prefix + ".grain_scale_texels", grain_scale_texels);
+  w->set(prefix + ".moving_objects", moving_objects);
+  w->set(prefix + ".moving_speed_mps", moving_speed_mps);
   w->set(prefix + ".aliasing", aliasing);
   w->set(prefix + ".aliasing_copies", aliasing_copies);
 }
@@ -215,6 +221,7 @@ Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const Scen
   // exactly the one built before they existed.
   if (p.grain) addGrain(p, &s);  // before the copies, so they repeat the grain too
   if (p.aliasing) addAliasingCopies(p, pts, &s);
+  if (p.moving_objects > 0) addMovers(p, pts, &s);
   if (p.dark_regions) addDarkZones(p, pts, &s);
   return s;
 }
@@ -251,6 +258,10 @@ std::string sceneToJson(const Scene& s) {
   for (const DarkZone& z : s.dark_zones)
     j["dark_zones"].push_back({{"centre", {z.centre.x(), z.centre.y(), z.centre.z()}},
                                {"radius_m", z.radius_m}, {"level", z.level}});
+  j["movers"] = json::array();
+  for (const MovingObject& m : s.movers)
+    j["movers"].push_back({{"object", m.object}, {"from", {m.from.x(), m.from.y(), m.from.z()}},
+                           {"to", {m.to.x(), m.to.y(), m.to.z()}}, {"period_s", m.period_s}});
   j["photo_folder"] = s.photo_folder;
   j["photos"] = s.photo_names;
   return j.dump(2);

@@ -29,10 +29,70 @@ void addGrain(const SceneParams& p, Scene* s) {
   }
 }
 
+namespace {
+
+/// Objects whose faces are richly textured (worth repeating or moving).
+std::vector<int> richObjects(const Scene& s) {
+  std::vector<int> out;
+  for (int i = 0; i < static_cast<int>(s.objects.size()); ++i)
+    if (s.objects[i].copy_of < 0 && s.texture_styles[s.objects[i].texture[0]] == TextureStyle::kRich)
+      out.push_back(i);
+  return out;
+}
+
+/// Gives b its own copies of its textures (same content).
+void cloneTextures(SceneBox* b, Scene* s) {
+  for (int f = 0; f < 6; ++f) {
+    const int t = b->texture[f];
+    if (t < 0) continue;
+    b->texture[f] = static_cast<int>(s->textures.size());
+    s->textures.push_back(MipTexture::fromImage(s->textures[t].levels[0].clone()));
+    s->texture_styles.push_back(s->texture_styles[t]);
+  }
+}
+
+}  // namespace
+
+Vec3 MovingObject::offsetAt(double t) const {
+  const double phase = t / period_s - std::floor(t / period_s);
+  const double a = phase < 0.5 ? 2 * phase : 2 - 2 * phase;
+  return a * (to - from);
+}
+
+void addMovers(const SceneParams& p, const std::vector<Vec3>& pts, Scene* s) {
+  const std::vector<int> sources = richObjects(*s);
+  if (sources.empty()) return;
+  cv::RNG rng(mixSeed(p.seed, 0x30f3));
+  const Vec3 room = s->room.hi - s->room.lo;
+  for (int m = 0; m < p.moving_objects; ++m) {
+    for (int attempt = 0; attempt < 200; ++attempt) {
+      const SceneBox& src = s->objects[sources[rng.uniform(0, static_cast<int>(sources.size()))]];
+      const Vec3 ext = (src.hi - src.lo).cwiseMin(Vec3(1.2, 1.2, 1.6));
+      const double len = rng.uniform(2.0, 8.0), ang = rng.uniform(0.0, 6.283185307);
+      const Vec3 step(len * std::cos(ang), len * std::sin(ang), 0.0);
+      const Vec3 lo(rng.uniform(s->room.lo.x() + 0.2, s->room.hi.x() - 0.2 - ext.x()),
+                    rng.uniform(s->room.lo.y() + 0.2, s->room.hi.y() - 0.2 - ext.y()), s->room.lo.z());
+      SceneBox swept;
+      swept.lo = lo.cwiseMin(lo + step);
+      swept.hi = (lo + ext).cwiseMax(lo + ext + step);
+      const bool in_room = (swept.lo.head<2>().array() > s->room.lo.head<2>().array() + 0.1).all() &&
+                           (swept.hi.head<2>().array() < s->room.hi.head<2>().array() - 0.1).all();
+      if (!in_room) continue;
+      if ((ext.array() >= room.array()).any() || !placeable(*s, swept, pts, p.clearance_m)) continue;
+      SceneBox b = src;
+      b.lo = lo;
+      b.hi = lo + ext;
+      b.kind = "mover";
+      cloneTextures(&b, s);
+      s->objects.push_back(b);
+      s->movers.push_back({static_cast<int>(s->objects.size()) - 1, lo, lo + step, 2.0 * len / p.moving_speed_mps});
+      break;
+    }
+  }
+}
+
 void addAliasingCopies(const SceneParams& p, const std::vector<Vec3>& pts, Scene* s) {
-  std::vector<int> sources;
-  for (int i = 0; i < static_cast<int>(s->objects.size()); ++i)
-    if (s->texture_styles[s->objects[i].texture[0]] == TextureStyle::kRich) sources.push_back(i);
+  const std::vector<int> sources = richObjects(*s);
   if (sources.empty()) return;
   cv::RNG rng(mixSeed(p.seed, 0xa11a5));
   const Vec3 room = s->room.hi - s->room.lo;
@@ -48,13 +108,7 @@ void addAliasingCopies(const SceneParams& p, const std::vector<Vec3>& pts, Scene
                   rng.uniform(s->room.lo.y() + 0.2, s->room.hi.y() - 0.2 - ext.y()), source.lo.z());
       b.hi = b.lo + ext;
       if (!placeable(*s, b, pts, p.clearance_m)) continue;
-      for (int f = 0; f < 6; ++f) {  // own entries (dark zones may darken them differently)
-        const int t = source.texture[f];
-        if (t < 0) continue;
-        b.texture[f] = static_cast<int>(s->textures.size());
-        s->textures.push_back(MipTexture::fromImage(s->textures[t].levels[0].clone()));
-        s->texture_styles.push_back(s->texture_styles[t]);
-      }
+      cloneTextures(&b, s);  // own entries: dark zones may darken them differently
       s->objects.push_back(b);
       break;
     }

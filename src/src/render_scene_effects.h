@@ -23,6 +23,10 @@ void addGrain(const SceneParams& p, Scene* s);
 /// texture content, own texture entries) at free places of the hall.
 void addAliasingCopies(const SceneParams& p, const std::vector<Vec3>& pts, Scene* s);
 
+/// Appends up to p.moving_objects movers: copies of textured objects whose
+/// whole swept box is free and keeps clearance from every camera position.
+void addMovers(const SceneParams& p, const std::vector<Vec3>& pts, Scene* s);
+
 /// Picks p.dark_zones zones centred on camera positions and bakes their
 /// darkening into every face texture (mip levels rebuilt).
 void addDarkZones(const SceneParams& p, const std::vector<Vec3>& pts, Scene* s);

@@ -22,6 +22,7 @@ void applyRealisticPreset(SceneParams* scene, SensorParams* sensor) {
   scene->dark_radius_m = 5.0;
   scene->grain = true;
   scene->aliasing = true;
+  scene->moving_objects = 3;
 }
 
 Status RenderSettings::read(const Config& c) {

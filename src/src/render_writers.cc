@@ -142,6 +142,8 @@ Expected<WriteStats> writeEurocSequence(const std::string& dir, const Scene& sce
   for (std::size_t k = 0; k < times.size(); ++k) {
     const std::int64_t ns = times[k];
     const SE3 T_W_B = poseAt(traj, ns);
+    rc0.placeMovers(ns * 1e-9);
+    rc1.placeMovers(ns * 1e-9);
     for (int c = 0; c < 2; ++c) {
       auto t0 = Clock::now();
       const cv::Mat& radiance = renderExposure(*rcs[c], cams[c]->K, traj, cams[c]->T_B_C, ns * 1e-9,
@@ -199,6 +201,7 @@ Expected<WriteStats> writeTumSequence(const std::string& dir, const Scene& scene
   for (std::size_t k = 0; k < times.size(); ++k) {
     const std::int64_t ns = times[k];
     const SE3 T_W_C = poseAt(traj, ns) * cam.T_B_C;
+    rc.placeMovers(ns * 1e-9);
     auto t0 = Clock::now();
     const cv::Mat& radiance =
         renderExposure(rc, cam.K, traj, cam.T_B_C, ns * 1e-9, spec.sensor, /*want_depth=*/true, &ro, &blurred);

@@ -201,12 +201,13 @@ TEST(RenderRealism, SettingsErrorsNameTheKey) {
   // The preset turns every effect on; single keys still override it.
   auto s = readRenderSettings(Config(), {"render.realistic=true", "render.scene.aliasing=false"});
   ASSERT_TRUE(s.ok()) << s.error();
-  EXPECT_TRUE(s->sensor.motion_blur && s->sensor.photon_noise && s->scene.dark_regions);
+  EXPECT_TRUE(s->sensor.motion_blur && s->sensor.photon_noise && s->scene.dark_regions && s->scene.moving_objects > 0);
   EXPECT_FALSE(s->scene.aliasing);
   // Defaults: every effect off (the look every cached render and accuracy test uses).
   auto d = readRenderSettings(Config(), {});
   ASSERT_TRUE(d.ok());
-  EXPECT_FALSE(d->sensor.motion_blur || d->sensor.photon_noise || d->scene.dark_regions || d->scene.aliasing);
+  EXPECT_FALSE(d->sensor.motion_blur || d->sensor.photon_noise || d->scene.dark_regions || d->scene.aliasing ||
+               d->scene.grain || d->scene.moving_objects > 0);
 }
 
 TEST(RenderRealism, CacheFingerprintCoversEverySetting) {
@@ -312,4 +313,39 @@ TEST(RenderRealism, AliasingCopiesLookExactlyLikeTheirSource) {
     }
   ASSERT_GT(compared, 500);
   EXPECT_LT(worst, 1.0);
+}
+
+TEST(RenderRealism, MoversSlideBackAndForthThroughTheView) {
+  SceneParams p = smallParams();
+  p.num_objects = 8;
+  p.wall_margin_m = 5.0;
+  p.moving_objects = 2;
+  auto s = smallScene(p);
+  ASSERT_TRUE(s.ok()) << s.error();
+  ASSERT_FALSE(s->movers.empty()) << "no mover could be placed";
+  const MovingObject& m = s->movers[0];
+  EXPECT_EQ(m.offsetAt(0.0), Vec3::Zero());
+  EXPECT_TRUE(m.offsetAt(0.5 * m.period_s).isApprox(m.to - m.from, 1e-9));
+  EXPECT_LT(m.offsetAt(m.period_s * 0.999).norm(), 0.01 * (m.to - m.from).norm());
+  EXPECT_NEAR((m.to - m.from).norm() / (0.5 * m.period_s), p.moving_speed_mps, 1e-9);
+  // A camera right above the mover's start, looking down: it sees the mover at
+  // time 0 and floor (or something else) once the mover has gone.
+  const SceneBox& b = s->objects[m.object];
+  Mat3 down;
+  down.col(0) = Vec3(1, 0, 0);
+  down.col(1) = Vec3(0, -1, 0);
+  down.col(2) = Vec3(0, 0, -1);
+  const Vec3 above(0.5 * (b.lo.x() + b.hi.x()), 0.5 * (b.lo.y() + b.hi.y()), b.hi.z() + 1.0);
+  const PinholeRadtan cam = smallCam();
+  Raycaster rc(*s, RayGrid::fromRadtan(cam));
+  RenderOutput out;
+  auto centreBox = [&](double t) {
+    rc.placeMovers(t);
+    rc.render(SE3(down, above), &out);
+    return out.face.at<int>(out.face.rows / 2, out.face.cols / 2) / 6 - 1;
+  };
+  EXPECT_EQ(centreBox(0.0), m.object);
+  EXPECT_NE(centreBox(0.5 * m.period_s), m.object);
+  EXPECT_EQ(centreBox(m.period_s), m.object);
+  EXPECT_NE(sceneToJson(*s).find("\"movers\""), std::string::npos);
 }

@@ -43,10 +43,12 @@ const char* kUsage =
     "  between rich and poor texture (e.g. 0.7 for keyframe-policy ablations).\n"
     "--realistic: the realism preset (render.realistic: true): photon + read noise at\n"
     "  the levels measured on real EuRoC frames, motion blur over the exposure, dark\n"
-    "  regions, aliasing copies of objects. Each effect has its own key:\n"
-    "  render.sensor.{photon_noise, photon_gain, noise_sigma, motion_blur, exposure_s,\n"
-    "  blur_max_taps}, render.scene.{dark_regions, dark_zones, dark_radius_m,\n"
-    "  dark_level, aliasing, aliasing_copies} (and every other render.scene/sensor key).\n"
+    "  regions, surface grain, aliasing copies and moving objects. Each effect has its\n"
+    "  own key: render.sensor.{photon_noise, photon_gain, noise_sigma, brightness,\n"
+    "  motion_blur, exposure_s, blur_max_taps}, render.scene.{dark_regions, dark_zones,\n"
+    "  dark_radius_m, dark_level, grain, grain_sigma, grain_scale_texels, aliasing,\n"
+    "  aliasing_copies, moving_objects, moving_speed_mps} (and every other\n"
+    "  render.scene/sensor key).\n"
     "--config FILE / --set key=value: those keys from a YAML file / one at a time\n"
     "  (--set wins). The settings used are written to DIR/render_config.yaml.\n";
 

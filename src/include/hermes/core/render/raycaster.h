@@ -69,6 +69,9 @@ class Raycaster {
   void render(const SE3& T_W_C, RenderOutput* out, bool want_depth = false,
               bool want_face = false) const;
   const RayGrid& rays() const { return rays_; }
+  /// Puts the scene's moving objects where they are at time t [s] (no-op
+  /// without movers); renders until the next call see them there.
+  void placeMovers(double t);
 
  private:
   struct Hit;

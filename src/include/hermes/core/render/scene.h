@@ -35,6 +35,16 @@ struct DarkZone {
   double level = 1;
 };
 
+/// An object that moves back and forth along a straight segment (its box in
+/// Scene::objects is the one at `from`, time 0): the box is offset by
+/// offsetAt(t), from 0 to (to - from) in half a period and back.
+struct MovingObject {
+  int object = -1;            ///< index into Scene::objects
+  Vec3 from = Vec3::Zero(), to = Vec3::Zero();  ///< box lo corner at the ends
+  double period_s = 10;       ///< there and back [s]
+  Vec3 offsetAt(double t) const;
+};
+
 struct Scene {
   std::uint64_t seed = 0;
   double texel_m = 1.0 / 128.0;     ///< texture resolution [m per texel]
@@ -44,6 +54,7 @@ struct Scene {
   std::vector<MipTexture> textures;
   std::vector<TextureStyle> texture_styles;
   std::vector<DarkZone> dark_zones;      ///< baked into the textures
+  std::vector<MovingObject> movers;      ///< objects that move (Raycaster::placeMovers)
   std::vector<std::string> photo_names;  ///< photographs available when built
   std::string photo_folder;
 };
@@ -73,6 +84,10 @@ struct SceneParams {
   /// placed elsewhere in the hall.
   bool aliasing = false;
   int aliasing_copies = 4;          ///< copies attempted
+  /// Moving objects: copies of textured objects sliding along free straight
+  /// segments in the hall (kept clear of every camera position); 0 = none.
+  int moving_objects = 0;
+  double moving_speed_mps = 1.0;    ///< [m/s]
   /// Reads keys under `prefix` (e.g. render.scene.clearance_m), then validates.
   Status read(const Config& c, const std::string& prefix = "render.scene");
   Status validate() const;
