@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 
 #include "hermes/core/image_stats.h"
 #include "hermes/core/render/motion_blur.h"
@@ -59,15 +60,26 @@ SceneParams smallParams() {
   return p;
 }
 
+/// The small scene, its camera and a sensor with motion blur over `exposure_s`.
+class BlurTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto s = smallScene(smallParams());
+    ASSERT_TRUE(s.ok()) << s.error();
+    scene = std::move(*s);
+    caster = std::make_unique<Raycaster>(scene, RayGrid::fromRadtan(cam));
+    sp.motion_blur = true;
+  }
+  Scene scene;
+  const PinholeRadtan cam = smallCam();
+  std::unique_ptr<Raycaster> caster;
+  SensorParams sp;
+};
+
 }  // namespace
 
-TEST(RenderRealism, BlurIsZeroWhenStaticAndGrowsWithSpeed) {
-  auto scene = smallScene(smallParams());
-  ASSERT_TRUE(scene.ok()) << scene.error();
-  const PinholeRadtan cam = smallCam();
-  Raycaster rc(*scene, RayGrid::fromRadtan(cam));
-  SensorParams sp;
-  sp.motion_blur = true;
+TEST_F(BlurTest, BlurIsZeroWhenStaticAndGrowsWithSpeed) {
+  const Raycaster& rc = *caster;
   sp.exposure_s = 0.01;
   double last = -1, last_change = 0;
   for (double speed : {0.0, 0.5, 1.0, 2.0}) {
@@ -100,14 +112,9 @@ TEST(RenderRealism, BlurIsZeroWhenStaticAndGrowsWithSpeed) {
   EXPECT_LT(b.mean_px, 1.4 * centre);
 }
 
-TEST(RenderRealism, BlurApproximatesAveragedSubExposureRenders) {
+TEST_F(BlurTest, BlurApproximatesAveragedSubExposureRenders) {
   // The reference: the mean of 16 renders at poses spread over the exposure.
-  auto scene = smallScene(smallParams());
-  ASSERT_TRUE(scene.ok()) << scene.error();
-  const PinholeRadtan cam = smallCam();
-  Raycaster rc(*scene, RayGrid::fromRadtan(cam));
-  SensorParams sp;
-  sp.motion_blur = true;
+  const Raycaster& rc = *caster;
   sp.exposure_s = 0.02;
   sp.blur_max_taps = 16;
   const Trajectory traj = moving(1.0, 1.5);
