@@ -5,7 +5,11 @@
 #include <filesystem>
 #include <fstream>
 
+#include <sstream>
+
 #include <unistd.h>
+
+#include "hermes/core/render/settings.h"
 
 namespace hermes {
 namespace fs = std::filesystem;
@@ -16,15 +20,39 @@ std::string quote(const std::string& s) { return "'" + s + "'"; }
 
 std::string number(const char* flag, double v) {
   char buf[64];
-  std::snprintf(buf, sizeof buf, " %s %g", flag, v);
+  std::snprintf(buf, sizeof buf, " %s %.17g", flag, v);  // exact: the fingerprint must match
   return buf;
+}
+
+std::string readText(const fs::path& p) {
+  std::ifstream f(p);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
 }
 
 }  // namespace
 
+Expected<std::string> renderFingerprint(const RenderRequest& req) {
+  auto s = render::readRenderSettings(Config(), req.settings);
+  if (!s.ok()) return Error{s.error()};
+  s->scene.seed = static_cast<std::uint64_t>(req.seed);
+  if (req.poor_fraction >= 0) s->scene.poor_fraction = req.poor_fraction;
+  return s->fingerprint();
+}
+
 Status renderCached(const RenderRequest& req, const std::string& folder) {
   const fs::path done(folder);
-  if (fs::exists(done / "done")) return Status::Ok();
+  auto fingerprint = renderFingerprint(req);
+  if (!fingerprint.ok()) return Error{"render " + folder + ": " + fingerprint.error()};
+  if (fs::exists(done / "done")) {
+    if (fs::exists(done / "render_config.yaml")) {
+      if (readText(done / "render_config.yaml") == *fingerprint) return Status::Ok();
+      std::fprintf(stderr, "[render] %s was rendered with other settings: rendering again\n", folder.c_str());
+    } else if (req.settings.empty()) {
+      return Status::Ok();  // rendered before the settings file existed, with the default look
+    }
+  }
   if (req.trajectories.empty()) return Error{"render " + folder + ": no trajectory given"};
   std::error_code ec;
   const fs::path sim = fs::read_symlink("/proc/self/exe", ec).parent_path() / "hermes_sim";
@@ -41,6 +69,7 @@ Status renderCached(const RenderRequest& req, const std::string& folder) {
   if (req.duration_s > 0) cmd += number("--duration", req.duration_s);
   if (req.rate_hz > 0) cmd += number("--rate", req.rate_hz);
   if (req.poor_fraction >= 0) cmd += number("--poor-fraction", req.poor_fraction);
+  for (const std::string& kv : req.settings) cmd += " --set " + quote(kv);
   std::fprintf(stderr, "[render] %zu trajectories into %s (log %s)\n", req.trajectories.size(),
                folder.c_str(), log.c_str());
   fs::create_directories(done.parent_path(), ec);

@@ -96,6 +96,19 @@ void RayGrid::finish() {
       const float av = (at(u, v + dv).normalized() - c).norm();
       pix_angle_[static_cast<std::size_t>(v) * w_ + u] = std::sqrt(ah * av);
     }
+  // Local Jacobian of the normalised coordinates by central differences, inverted.
+  jinv_.resize(ray_.size());
+  for (int v = 0; v < h_; ++v)
+    for (int u = 0; u < w_; ++u) {
+      const int ul = std::max(u - 1, 0), ur = std::min(u + 1, w_ - 1);
+      const int vt = std::max(v - 1, 0), vb = std::min(v + 1, h_ - 1);
+      const Eigen::Vector3f ju = (at(ur, v) - at(ul, v)) / static_cast<float>(std::max(ur - ul, 1));
+      const Eigen::Vector3f jv = (at(u, vb) - at(u, vt)) / static_cast<float>(std::max(vb - vt, 1));
+      const float det = ju.x() * jv.y() - jv.x() * ju.y();
+      jinv_[static_cast<std::size_t>(v) * w_ + u] =
+          std::abs(det) > 1e-12f ? Eigen::Vector4f(jv.y() / det, -jv.x() / det, -ju.y() / det, ju.x() / det)
+                                 : Eigen::Vector4f::Zero();
+    }
   tiles_x_ = (w_ + kTile - 1) / kTile;
   tiles_y_ = (h_ + kTile - 1) / kTile;
   tiles_.resize(static_cast<std::size_t>(tiles_x_) * tiles_y_);
@@ -139,6 +152,16 @@ Raycaster::Raycaster(const Scene& scene, RayGrid rays) : scene_(scene), rays_(st
     hi_.push_back(b.hi.cast<float>());
     centre_.push_back((0.5 * (b.lo + b.hi)).cast<float>());
     radius_.push_back(static_cast<float>(0.5 * (b.hi - b.lo).norm()) + 1e-3f);
+  }
+}
+
+void Raycaster::placeMovers(double t) {
+  for (const MovingObject& m : scene_.movers) {
+    const SceneBox& b = scene_.objects[m.object];
+    const Vec3 off = m.offsetAt(t);
+    lo_[m.object] = (b.lo + off).cast<float>();
+    hi_[m.object] = (b.hi + off).cast<float>();
+    centre_[m.object] = (0.5 * (b.lo + b.hi) + off).cast<float>();
   }
 }
 

@@ -10,6 +10,7 @@
 #include <opencv2/core.hpp>
 
 #include "hermes/core/render/sensor.h"
+#include "render_scene_effects.h"
 
 namespace hermes {
 namespace render {
@@ -22,6 +23,15 @@ Status SceneParams::validate() const {
   if (num_objects < 0 || num_objects > 200) return Error{"scene: num_objects must be in [0, 200]"};
   if (!(texel_m >= 1e-3 && texel_m <= 0.1)) return Error{"scene: texel_m must be in [0.001, 0.1]"};
   if (!(poor_fraction >= 0 && poor_fraction <= 1)) return Error{"scene: poor_fraction must be in [0, 1]"};
+  if (dark_zones < 1 || dark_zones > 50) return Error{"scene: dark_zones must be in [1, 50]"};
+  if (!(dark_radius_m > 0 && dark_radius_m <= 100)) return Error{"scene: dark_radius_m must be in (0, 100]"};
+  if (!(dark_level >= 0 && dark_level <= 1)) return Error{"scene: dark_level must be in [0, 1]"};
+  if (!(grain_sigma >= 0 && grain_sigma <= 50)) return Error{"scene: grain_sigma must be in [0, 50]"};
+  if (!(grain_scale_texels >= 0.3 && grain_scale_texels <= 20))
+    return Error{"scene: grain_scale_texels must be in [0.3, 20]"};
+  if (moving_objects < 0 || moving_objects > 20) return Error{"scene: moving_objects must be in [0, 20]"};
+  if (!(moving_speed_mps > 0 && moving_speed_mps <= 20)) return Error{"scene: moving_speed_mps must be in (0, 20]"};
+  if (aliasing_copies < 1 || aliasing_copies > 50) return Error{"scene: aliasing_copies must be in [1, 50]"};
   return Status::Ok();
 }
 
@@ -32,11 +42,43 @@ Status SceneParams::read(const Config& c, const std::string& prefix) {
                     c.get(prefix + ".ceiling_margin_m", &ceiling_margin_m),
                     c.get(prefix + ".clearance_m", &clearance_m), c.get(prefix + ".num_objects", &num_objects),
                     c.get(prefix + ".texel_m", &texel_m), c.get(prefix + ".poor_fraction", &poor_fraction),
-                    c.get(prefix + ".poor_walls", &poor_walls), c.get(prefix + ".photo_folder", &photo_folder)})
+                    c.get(prefix + ".poor_walls", &poor_walls), c.get(prefix + ".photo_folder", &photo_folder),
+                    c.get(prefix + ".dark_regions", &dark_regions), c.get(prefix + ".dark_zones", &dark_zones),
+                    c.get(prefix + ".dark_radius_m", &dark_radius_m), c.get(prefix + ".dark_level", &dark_level),
+                    c.get(prefix + ".grain", &grain), c.get(prefix + ".grain_sigma", &grain_sigma),
+                    c.get(prefix + ".grain_scale_texels", &grain_scale_texels),
+                    c.get(prefix + ".moving_objects", &moving_objects),
+                    c.get(prefix + ".moving_speed_mps", &moving_speed_mps),
+                    c.get(prefix + ".aliasing", &aliasing), c.get(prefix + ".aliasing_copies", &aliasing_copies)})
     if (!st) return st;
   if (seed_i < 0) return Error{prefix + ".seed must be >= 0 (" + c.origin() + ")"};
   seed = static_cast<std::uint64_t>(seed_i);
-  return validate();
+  if (Status st = validate(); !st) return Error{st.error() + " (" + c.origin() + ")"};
+  return Status::Ok();
+}
+
+void SceneParams::write(ConfigWriter* w, const std::string& prefix) const {
+  w->set(prefix + ".seed", static_cast<int>(seed));
+  w->set(prefix + ".wall_margin_m", wall_margin_m);
+  w->set(prefix + ".floor_margin_m", floor_margin_m);
+  w->set(prefix + ".ceiling_margin_m", ceiling_margin_m);
+  w->set(prefix + ".clearance_m", clearance_m);
+  w->set(prefix + ".num_objects", num_objects);
+  w->set(prefix + ".texel_m", texel_m);
+  w->set(prefix + ".poor_fraction", poor_fraction);
+  w->set(prefix + ".poor_walls", poor_walls);
+  w->set(prefix + ".photo_folder", photo_folder);
+  w->set(prefix + ".dark_regions", dark_regions);
+  w->set(prefix + ".dark_zones", dark_zones);
+  w->set(prefix + ".dark_radius_m", dark_radius_m);
+  w->set(prefix + ".dark_level", dark_level);
+  w->set(prefix + ".grain", grain);
+  w->set(prefix + ".grain_sigma", grain_sigma);
+  w->set(prefix + ".grain_scale_texels", grain_scale_texels);
+  w->set(prefix + ".moving_objects", moving_objects);
+  w->set(prefix + ".moving_speed_mps", moving_speed_mps);
+  w->set(prefix + ".aliasing", aliasing);
+  w->set(prefix + ".aliasing_copies", aliasing_copies);
 }
 
 double distanceToBox(const Vec3& p, const Vec3& lo, const Vec3& hi) {
@@ -101,11 +143,19 @@ SceneBox proposeObject(const SceneBox& room, cv::RNG& rng) {
   return b;
 }
 
+}  // namespace
+
 bool overlaps(const SceneBox& a, const SceneBox& b, double gap) {
   return (a.lo.array() - gap < b.hi.array()).all() && (b.lo.array() - gap < a.hi.array()).all();
 }
 
-}  // namespace
+bool placeable(const Scene& s, const SceneBox& b, const std::vector<Vec3>& pts, double clearance_m) {
+  for (const SceneBox& o : s.objects)
+    if (overlaps(o, b, 0.3)) return false;
+  for (const Vec3& p : pts)
+    if (distanceToBox(p, b.lo, b.hi) <= clearance_m + 0.09) return false;
+  return true;
+}
 
 void appendRigPositions(const Trajectory& trajectory, const std::vector<SE3>& T_B_C,
                         std::vector<Vec3>* positions) {
@@ -137,11 +187,7 @@ Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const Scen
   for (int i = 0; i < p.num_objects; ++i) {
     for (int attempt = 0; attempt < 60; ++attempt) {
       SceneBox b = proposeObject(s.room, rng);
-      bool ok = true;
-      for (const SceneBox& o : s.objects) ok = ok && !overlaps(o, b, 0.3);
-      for (std::size_t k = 0; ok && k < pts.size(); ++k)
-        ok = distanceToBox(pts[k], b.lo, b.hi) > p.clearance_m + 0.09;
-      if (ok) {
+      if (placeable(s, b, pts, p.clearance_m)) {
         s.objects.push_back(b);
         break;
       }
@@ -171,6 +217,12 @@ Expected<Scene> buildScene(const std::vector<Vec3>& camera_positions, const Scen
   };
   texturize(s.room, false, true);
   for (SceneBox& b : s.objects) texturize(b, p.poor_walls && rng.uniform(0, 5) == 0, false);
+  // The effects draw from their own random streams: without them the scene is
+  // exactly the one built before they existed.
+  if (p.grain) addGrain(p, &s);  // before the copies, so they repeat the grain too
+  if (p.aliasing) addAliasingCopies(p, pts, &s);
+  if (p.moving_objects > 0) addMovers(p, pts, &s);
+  if (p.dark_regions) addDarkZones(p, pts, &s);
   return s;
 }
 
@@ -191,6 +243,7 @@ std::string sceneToJson(const Scene& s) {
       faces.push_back(fj);
     }
     j["faces"] = faces;
+    if (b.copy_of >= 0) j["copy_of"] = b.copy_of;
     return j;
   };
   json j;
@@ -201,6 +254,14 @@ std::string sceneToJson(const Scene& s) {
   j["room"] = box(s.room);
   j["objects"] = json::array();
   for (const SceneBox& b : s.objects) j["objects"].push_back(box(b));
+  j["dark_zones"] = json::array();
+  for (const DarkZone& z : s.dark_zones)
+    j["dark_zones"].push_back({{"centre", {z.centre.x(), z.centre.y(), z.centre.z()}},
+                               {"radius_m", z.radius_m}, {"level", z.level}});
+  j["movers"] = json::array();
+  for (const MovingObject& m : s.movers)
+    j["movers"].push_back({{"object", m.object}, {"from", {m.from.x(), m.from.y(), m.from.z()}},
+                           {"to", {m.to.x(), m.to.y(), m.to.z()}}, {"period_s", m.period_s}});
   j["photo_folder"] = s.photo_folder;
   j["photos"] = s.photo_names;
   return j.dump(2);

@@ -20,23 +20,54 @@ double unit(std::uint64_t h) { return static_cast<double>(h >> 11) * (1.0 / 9007
 
 Status SensorParams::read(const Config& c, const std::string& prefix) {
   for (Status st : {c.get(prefix + ".noise_sigma", &noise_sigma), c.get(prefix + ".vignetting", &vignetting),
+                    c.get(prefix + ".brightness", &brightness),
                     c.get(prefix + ".drift_amplitude", &drift_amplitude),
                     c.get(prefix + ".step_amplitude", &step_amplitude),
                     c.get(prefix + ".step_period_s", &step_period_s),
-                    c.get(prefix + ".step_probability", &step_probability), c.get(prefix + ".noise", &noise)})
+                    c.get(prefix + ".step_probability", &step_probability), c.get(prefix + ".noise", &noise),
+                    c.get(prefix + ".photon_noise", &photon_noise), c.get(prefix + ".photon_gain", &photon_gain),
+                    c.get(prefix + ".motion_blur", &motion_blur), c.get(prefix + ".exposure_s", &exposure_s),
+                    c.get(prefix + ".blur_max_taps", &blur_max_taps)})
     if (!st) return st;
-  return validate();
+  if (Status st = validate(); !st) return Error{st.error() + " (" + c.origin() + ")"};
+  return Status::Ok();
 }
 
 Status SensorParams::validate() const {
   if (!(noise_sigma >= 0 && noise_sigma < 50)) return Error{"sensor: noise_sigma must be in [0, 50)"};
+  if (!(brightness > 0.05 && brightness <= 20)) return Error{"sensor: brightness must be in (0.05, 20]"};
   if (!(vignetting >= 0 && vignetting < 1)) return Error{"sensor: vignetting must be in [0, 1)"};
   if (!(drift_amplitude >= 0 && drift_amplitude < 1)) return Error{"sensor: drift_amplitude must be in [0, 1)"};
   if (!(step_amplitude >= 0 && step_amplitude < 1)) return Error{"sensor: step_amplitude must be in [0, 1)"};
   if (!(step_period_s > 1)) return Error{"sensor: step_period_s must be > 1"};
   if (!(step_probability >= 0 && step_probability <= 1))
     return Error{"sensor: step_probability must be in [0, 1]"};
+  if (!(photon_gain >= 0 && photon_gain <= 10)) return Error{"sensor: photon_gain must be in [0, 10]"};
+  if (!(exposure_s > 0 && exposure_s <= 0.05)) return Error{"sensor: exposure_s must be in (0, 0.05] s"};
+  if (blur_max_taps < 2 || blur_max_taps > 64) return Error{"sensor: blur_max_taps must be in [2, 64]"};
   return Status::Ok();
+}
+
+void SensorParams::write(ConfigWriter* w, const std::string& prefix) const {
+  w->set(prefix + ".noise_sigma", noise_sigma);
+  w->set(prefix + ".brightness", brightness);
+  w->set(prefix + ".vignetting", vignetting);
+  w->set(prefix + ".drift_amplitude", drift_amplitude);
+  w->set(prefix + ".step_amplitude", step_amplitude);
+  w->set(prefix + ".step_period_s", step_period_s);
+  w->set(prefix + ".step_probability", step_probability);
+  w->set(prefix + ".noise", noise);
+  w->set(prefix + ".photon_noise", photon_noise);
+  w->set(prefix + ".photon_gain", photon_gain);
+  w->set(prefix + ".motion_blur", motion_blur);
+  w->set(prefix + ".exposure_s", exposure_s);
+  w->set(prefix + ".blur_max_taps", blur_max_taps);
+}
+
+double SensorParams::sigmaAt(double grey) const {
+  if (!noise) return 0.0;
+  const double var = noise_sigma * noise_sigma + (photon_noise ? photon_gain * std::max(grey, 0.0) : 0.0);
+  return std::sqrt(var);
 }
 
 Sensor::Sensor(const SensorParams& p, std::uint64_t seed, int width, int height) : p_(p), seed_(seed) {
@@ -44,6 +75,7 @@ Sensor::Sensor(const SensorParams& p, std::uint64_t seed, int width, int height)
   cv::RNG table_rng(mixSeed(seed, 0x401));
   table_rng.fill(table, cv::RNG::NORMAL, 0.0, 1.0);
   noise_table_.assign(table.ptr<float>(), table.ptr<float>() + table.cols);
+  for (int i = 0; i <= 256; ++i) sigma_lut_.push_back(static_cast<float>(p_.sigmaAt(i)));
   vignette_.create(height, width, CV_32F);
   const double cx = 0.5 * (width - 1), cy = 0.5 * (height - 1);
   const double r2max = cx * cx + cy * cy;
@@ -71,14 +103,15 @@ double Sensor::gain(double t) const {
   const double a = std::clamp(since / 0.5, 0.0, 1.0);  // 0.5 s auto-exposure transition
   const double s = a * a * (3 - 2 * a);
   const double step = (1 - s) * stepLevel(k - 1) + s * stepLevel(k);
-  return std::exp(drift + step);
+  return p_.brightness * std::exp(drift + step);
 }
 
 cv::Mat Sensor::expose(const cv::Mat& radiance, double t, int cam) const {
   const float g = static_cast<float>(gain(t) * (cam == 0 ? 1.0 : 0.97));
   // Noise: a per-frame odd stride walk through a fixed table of N(0,1) samples
   // (a permutation of the table, so no sample repeats within a frame).
-  const bool noisy = p_.noise && p_.noise_sigma > 0;
+  const bool noisy = p_.noise && (p_.noise_sigma > 0 || (p_.photon_noise && p_.photon_gain > 0));
+  const bool photon = p_.photon_noise;
   const auto tns = static_cast<std::uint64_t>(std::llround(t * 1e6));  // us: frame identity
   const std::uint64_t h = mixSeed(mixSeed(seed_, tns), static_cast<std::uint64_t>(cam) + 100);
   const std::uint32_t mask = static_cast<std::uint32_t>(noise_table_.size() - 1);
@@ -93,7 +126,9 @@ cv::Mat Sensor::expose(const cv::Mat& radiance, double t, int cam) const {
     for (int u = 0; u < radiance.cols; ++u) {
       float x = r[u] * g * vg[u] + 0.5f;
       if (noisy) {
-        x += sigma * noise_table_[idx];
+        // Photon noise: sigma from the expected level (clamped to the LUT range).
+        const float sg = photon ? sigma_lut_[static_cast<int>(std::min(std::max(x, 0.0f), 256.0f))] : sigma;
+        x += sg * noise_table_[idx];
         idx = (idx + stride) & mask;
       }
       x = std::min(std::max(x, 0.0f), 255.0f);

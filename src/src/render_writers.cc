@@ -11,6 +11,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "hermes/core/render/motion_blur.h"
 #include "hermes/core/render/raycaster.h"
 
 namespace hermes {
@@ -137,13 +138,17 @@ Expected<WriteStats> writeEurocSequence(const std::string& dir, const Scene& sce
   const std::vector<int> png = {cv::IMWRITE_PNG_COMPRESSION, spec.png_compression};
   WriteStats stats;
   RenderOutput ro;
+  cv::Mat blurred;
   for (std::size_t k = 0; k < times.size(); ++k) {
     const std::int64_t ns = times[k];
     const SE3 T_W_B = poseAt(traj, ns);
+    rc0.placeMovers(ns * 1e-9);
+    rc1.placeMovers(ns * 1e-9);
     for (int c = 0; c < 2; ++c) {
       auto t0 = Clock::now();
-      rcs[c]->render(T_W_B * cams[c]->T_B_C, &ro);
-      const cv::Mat img = sensors[c]->expose(ro.radiance, ns * 1e-9, c);
+      const cv::Mat& radiance = renderExposure(*rcs[c], cams[c]->K, traj, cams[c]->T_B_C, ns * 1e-9,
+                                               spec.sensor, false, &ro, &blurred);
+      const cv::Mat img = sensors[c]->expose(radiance, ns * 1e-9, c);
       stats.render_s += secondsSince(t0);
       t0 = Clock::now();
       const std::string name = std::to_string(ns) + ".png";
@@ -191,13 +196,16 @@ Expected<WriteStats> writeTumSequence(const std::string& dir, const Scene& scene
   const std::vector<int> png = {cv::IMWRITE_PNG_COMPRESSION, spec.png_compression};
   WriteStats stats;
   RenderOutput ro;
+  cv::Mat blurred;
   cv::Mat depth16(cam.K.height, cam.K.width, CV_16U);
   for (std::size_t k = 0; k < times.size(); ++k) {
     const std::int64_t ns = times[k];
     const SE3 T_W_C = poseAt(traj, ns) * cam.T_B_C;
+    rc.placeMovers(ns * 1e-9);
     auto t0 = Clock::now();
-    rc.render(T_W_C, &ro, /*want_depth=*/true);
-    const cv::Mat img = sensor.expose(ro.radiance, ns * 1e-9, 0);
+    const cv::Mat& radiance =
+        renderExposure(rc, cam.K, traj, cam.T_B_C, ns * 1e-9, spec.sensor, /*want_depth=*/true, &ro, &blurred);
+    const cv::Mat img = sensor.expose(radiance, ns * 1e-9, 0);
     for (int v = 0; v < depth16.rows; ++v) {
       const float* z = ro.depth.ptr<float>(v);
       auto* d = depth16.ptr<std::uint16_t>(v);

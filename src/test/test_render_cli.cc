@@ -160,3 +160,23 @@ TEST(RenderCli, BadArgumentsExitTwo) {
   EXPECT_EQ(run("--bogus"), 2);
   EXPECT_EQ(run("--help"), 0);
 }
+
+TEST(RenderCli, RealisticPresetAndSettingsAreRecorded) {
+  // --realistic switches every effect on, --set overrides one, and the settings
+  // used land in render_config.yaml (what the render cache compares).
+  const std::string out = ::testing::TempDir() + "/render_cli_realistic";
+  fs::remove_all(out);
+  const std::string args = "--trajectory " + kGt + " --duration 0.25 --rate 4 --width 188 --height 120";
+  ASSERT_EQ(run(args + " --realistic --set render.sensor.exposure_s=0.004 --out " + out), 0);
+  const YAML::Node cfg = YAML::LoadFile(out + "/render_config.yaml");
+  EXPECT_TRUE(cfg["render"]["realistic"].as<bool>());
+  EXPECT_TRUE(cfg["render"]["sensor"]["motion_blur"].as<bool>());
+  EXPECT_TRUE(cfg["render"]["sensor"]["photon_noise"].as<bool>());
+  EXPECT_TRUE(cfg["render"]["scene"]["dark_regions"].as<bool>());
+  EXPECT_TRUE(cfg["render"]["scene"]["aliasing"].as<bool>());
+  EXPECT_DOUBLE_EQ(cfg["render"]["sensor"]["exposure_s"].as<double>(), 0.004);
+  EXPECT_GT(firstImageGradient(out), 0);
+  EXPECT_EQ(run(args + " --set render.sensor.no_such_key=1 --out " + out), 2);
+  EXPECT_EQ(run(args + " --set render.sensor.exposure_s=1 --out " + out), 2);
+  EXPECT_EQ(run(args + " --set exposure_s --out " + out), 2);
+}

@@ -15,6 +15,8 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "hermes/core/render/dataset_writer.h"
+#include "hermes/core/render/motion_blur.h"
+#include "hermes/core/render/settings.h"
 #include "hermes/core/render/raycaster.h"
 #include "hermes/core/render/rig.h"
 #include "hermes/core/render/scene.h"
@@ -37,12 +39,17 @@ double wallNow() {
 int main(int argc, char** argv) {
   std::string json_out, traj_path = "/work/shared/data/euroc_gt/MH_01_easy.txt";
   int frames = 60;
+  std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help") {
-      std::puts("usage: hermes_bench_render [--json FILE] [--frames N] [--trajectory TUM]");
+      std::puts("usage: hermes_bench_render [--json FILE] [--frames N] [--trajectory TUM]\n"
+                "                           [--realistic] [--set key=value ...]\n"
+                "  --realistic / --set: render settings as hermes_sim takes them (render.realistic=true)");
       return 0;
-    } else if (a == "--json" && i + 1 < argc) json_out = argv[++i];
+    } else if (a == "--realistic") sets.push_back("render.realistic=true");
+    else if (a == "--set" && i + 1 < argc) sets.push_back(argv[++i]);
+    else if (a == "--json" && i + 1 < argc) json_out = argv[++i];
     else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));
     else if (a == "--trajectory" && i + 1 < argc) traj_path = argv[++i];
     else {
@@ -51,6 +58,12 @@ int main(int argc, char** argv) {
     }
   }
   cv::setNumThreads(1);
+  auto settings = render::readRenderSettings(Config(), sets);
+  if (!settings.ok()) {
+    std::fprintf(stderr, "hermes_bench_render: %s\n", settings.error().c_str());
+    return 2;
+  }
+  const render::SensorParams& sp = settings->sensor;
   auto traj = readTumTrajectory(traj_path);
   if (!traj.ok()) {
     std::fprintf(stderr, "hermes_bench_render: %s\n", traj.error().c_str());
@@ -61,7 +74,7 @@ int main(int argc, char** argv) {
   std::vector<Vec3> pos;
   for (const StampedPose& p : *traj) pos.push_back(p.T_W_B.translation());
   double w0 = wallNow(), c0 = cpuNow();
-  auto scene = render::buildScene(pos, render::SceneParams{});
+  auto scene = render::buildScene(pos, settings->scene);
   if (!scene.ok()) {
     std::fprintf(stderr, "hermes_bench_render: %s\n", scene.error().c_str());
     return 1;
@@ -73,7 +86,8 @@ int main(int argc, char** argv) {
   render::Raycaster rc1(*scene, render::RayGrid::fromRadtan(cam1));
   render::Raycaster rcd(*scene, render::RayGrid::fromPinhole(rgbd.K));
   const double rays_cpu = cpuNow() - c0;
-  render::Sensor sensor(render::SensorParams{}, 1, 752, 480), sensor_d(render::SensorParams{}, 2, 640, 480);
+  render::Sensor sensor(sp, 1, 752, 480), sensor_d(sp, 2, 640, 480);
+  cv::Mat blurred;
 
   // Frames spread over the whole trajectory (varied views, 0.5 s apart).
   std::vector<double> times;
@@ -88,10 +102,8 @@ int main(int argc, char** argv) {
     SE3 T_W_B;
     if (!interpolatePose(*traj, std::min(t, traj->back().t), &T_W_B)) continue;
     double w = wallNow(), c = cpuNow();
-    rc0.render(T_W_B * cam0.T_B_C, &ro);
-    cv::Mat i0 = sensor.expose(ro.radiance, t, 0);
-    rc1.render(T_W_B * cam1.T_B_C, &ro);
-    cv::Mat i1 = sensor.expose(ro.radiance, t, 1);
+    cv::Mat i0 = sensor.expose(render::renderExposure(rc0, cam0.K, *traj, cam0.T_B_C, t, sp, false, &ro, &blurred), t, 0);
+    cv::Mat i1 = sensor.expose(render::renderExposure(rc1, cam1.K, *traj, cam1.T_B_C, t, sp, false, &ro, &blurred), t, 1);
     r_cpu += cpuNow() - c;
     r_wall += wallNow() - w;
     w = wallNow();
@@ -103,8 +115,7 @@ int main(int argc, char** argv) {
     bytes += std::filesystem::file_size(tmp + "/cam0.png");
     w = wallNow();
     c = cpuNow();
-    rcd.render(T_W_B * rgbd.T_B_C, &ro, true);
-    cv::Mat g = sensor_d.expose(ro.radiance, t, 0);
+    cv::Mat g = sensor_d.expose(render::renderExposure(rcd, rgbd.K, *traj, rgbd.T_B_C, t, sp, true, &ro, &blurred), t, 0);
     cv::Mat d16;
     ro.depth.convertTo(d16, CV_16U, rgbd.depth_scale);
     cv::imwrite(tmp + "/rgb.png", g, png);
@@ -120,6 +131,7 @@ int main(int argc, char** argv) {
   j["frames"] = times.size();
   j["resolution"] = {752, 480};
   j["threads"] = 1;
+  j["settings"] = sets;
   j["scene_build_s"] = {{"cpu", scene_cpu}, {"wall", scene_wall}};
   j["ray_grid_build_s_cpu"] = rays_cpu;
   j["stereo_pairs_per_s_render_only"] = {{"cpu", n / r_cpu}, {"wall", n / r_wall}};

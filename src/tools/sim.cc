@@ -15,6 +15,7 @@
 #include "hermes/core/render/dataset_writer.h"
 #include "hermes/core/render/rig.h"
 #include "hermes/core/render/scene.h"
+#include "hermes/core/render/settings.h"
 #include "hermes/core/trajectory.h"
 
 using namespace hermes;
@@ -25,7 +26,7 @@ const char* kUsage =
     "usage: hermes_sim --trajectory GT.txt [--trajectory GT2.txt ...] --out DIR\n"
     "                  [--format euroc|tum] [--start S] [--duration S] [--rate HZ] [--seed N]\n"
     "                  [--width W --height H] [--no-noise] [--png-compression 0-9]\n"
-    "                  [--poor-fraction F]\n"
+    "                  [--poor-fraction F] [--realistic] [--config FILE] [--set key=value ...]\n"
     "Renders one dataset folder per trajectory (TUM file of the body/IMU pose, e.g.\n"
     "shared/data/euroc_gt/MH_01_easy.txt) under DIR/<trajectory stem>, all inside ONE\n"
     "procedural scene enclosing every trajectory; the scene is described in DIR/scene.json.\n"
@@ -39,7 +40,17 @@ const char* kUsage =
     "--poor-fraction: share in [0, 1] of the wall/object panels left near-uniform\n"
     "  (texture-poor) on the textured faces (default 0.25; one wall and about a fifth\n"
     "  of the objects are poor regardless). Higher values give views that alternate\n"
-    "  between rich and poor texture (e.g. 0.7 for keyframe-policy ablations).\n";
+    "  between rich and poor texture (e.g. 0.7 for keyframe-policy ablations).\n"
+    "--realistic: the realism preset (render.realistic: true): photon + read noise at\n"
+    "  the levels measured on real EuRoC frames, motion blur over the exposure, dark\n"
+    "  regions, surface grain, aliasing copies and moving objects. Each effect has its\n"
+    "  own key: render.sensor.{photon_noise, photon_gain, noise_sigma, brightness,\n"
+    "  motion_blur, exposure_s, blur_max_taps}, render.scene.{dark_regions, dark_zones,\n"
+    "  dark_radius_m, dark_level, grain, grain_sigma, grain_scale_texels, aliasing,\n"
+    "  aliasing_copies, moving_objects, moving_speed_mps} (and every other\n"
+    "  render.scene/sensor key).\n"
+    "--config FILE / --set key=value: those keys from a YAML file / one at a time\n"
+    "  (--set wins). The settings used are written to DIR/render_config.yaml.\n";
 
 int usageError(const std::string& msg) {
   std::fprintf(stderr, "hermes_sim: %s (see --help)\n", msg.c_str());
@@ -58,7 +69,9 @@ int main(int argc, char** argv) {
   std::string out, format = "euroc";
   double start = 0, duration = -1, rate = -1, seed_d = 1, width = -1, height = -1, comp = 1;
   double poor_fraction = render::SceneParams().poor_fraction;
-  bool noise = true;
+  bool noise = true, realistic = false, poor_given = false;
+  std::string config_path;
+  std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&](std::string* v) {
@@ -72,6 +85,12 @@ int main(int argc, char** argv) {
       return 0;
     } else if (a == "--no-noise") {
       noise = false;
+    } else if (a == "--realistic") {
+      realistic = true;
+    } else if (a == "--config" || a == "--set") {
+      if (!next(&v)) return usageError(a + " needs a value");
+      if (a == "--config") config_path = v;
+      else sets.push_back(v);
     } else if (a == "--trajectory" || a == "--out" || a == "--format" || a == "--start" ||
                a == "--duration" || a == "--rate" || a == "--seed" || a == "--width" ||
                a == "--height" || a == "--png-compression" || a == "--poor-fraction") {
@@ -88,7 +107,7 @@ int main(int argc, char** argv) {
         else if (a == "--seed") seed_d = x;
         else if (a == "--width") width = x;
         else if (a == "--height") height = x;
-        else if (a == "--poor-fraction") poor_fraction = x;
+        else if (a == "--poor-fraction") poor_fraction = x, poor_given = true;
         else comp = x;
       }
     } else {
@@ -137,9 +156,21 @@ int main(int argc, char** argv) {
   // independent of --start/--duration/--format, so windows of one seed share it).
   std::vector<Vec3> positions;
   for (const Trajectory& t : trajs) render::appendRigPositions(t, {cam0.T_B_C, cam1.T_B_C}, &positions);
-  render::SceneParams sp;
+  // Render settings: config file, --realistic, --set, then the plain flags.
+  Config cfg;
+  if (!config_path.empty()) {
+    auto c = Config::fromFile(config_path);
+    if (!c.ok()) return usageError("--config: " + c.error());
+    cfg = *c;
+  }
+  if (realistic) sets.insert(sets.begin(), "render.realistic=true");
+  auto read = render::readRenderSettings(cfg, sets);
+  if (!read.ok()) return usageError(read.error());
+  render::RenderSettings settings = *read;
+  if (!noise) settings.sensor.noise = false;
+  render::SceneParams& sp = settings.scene;
   sp.seed = static_cast<std::uint64_t>(seed_d);
-  sp.poor_fraction = poor_fraction;
+  if (poor_given) sp.poor_fraction = poor_fraction;
   const auto t_scene = std::chrono::steady_clock::now();
   auto scene = render::buildScene(positions, sp);
   if (!scene.ok()) {
@@ -163,13 +194,22 @@ int main(int argc, char** argv) {
     }
   }
 
+  {
+    std::ofstream f(out + "/render_config.yaml");
+    f << settings.fingerprint();
+    if (!f) {
+      std::fprintf(stderr, "hermes_sim: cannot write %s/render_config.yaml\n", out.c_str());
+      return 1;
+    }
+  }
+
   render::SequenceSpec spec;
   spec.start_s = start;
   spec.duration_s = duration;
   spec.rate_hz = rate;
   spec.seed = sp.seed;
   spec.png_compression = static_cast<int>(comp);
-  spec.sensor.noise = noise;
+  spec.sensor = settings.sensor;
   for (std::size_t i = 0; i < trajs.size(); ++i) {
     const std::string dir = out + "/" + stems[i];
     const std::string label = stems[i];

@@ -15,6 +15,7 @@
 
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/core/crc32.h"
 #include "hermes/core/dataset.h"
 #include "hermes/core/evaluation.h"
 #include "hermes/core/render_cache.h"
@@ -28,12 +29,20 @@ struct RenderSpec {
   double duration_s = 20;      ///< [s]
   double poor_fraction = 0.25; ///< hermes_sim --poor-fraction (0.25 = its default scene)
   int seed = 1;
+  std::vector<std::string> settings;  ///< hermes_sim --set key=value (e.g. render.realistic=true)
 
   std::string key() const {
     char buf[256];
     std::snprintf(buf, sizeof buf, "%s_s%g_d%g_pf%g_seed%d", stem.c_str(), start_s, duration_s,
                   poor_fraction, seed);
-    return buf;
+    std::string k = buf;
+    if (!settings.empty()) {  // the folder also records them (render_config.yaml)
+      std::string all;
+      for (const std::string& s : settings) all += s + ";";
+      std::snprintf(buf, sizeof buf, "_set%08x", crc32(all.data(), all.size()));
+      k += buf;
+    }
+    return k;
   }
   std::string describe() const {
     char buf[256];
@@ -52,6 +61,7 @@ inline Expected<std::string> renderCached(const RenderSpec& spec, const std::str
   req.duration_s = spec.duration_s;
   req.seed = spec.seed;
   req.poor_fraction = spec.poor_fraction;
+  req.settings = spec.settings;
   const std::string folder = cache_root + "/" + spec.key();
   if (Status s = hermes::renderCached(req, folder); !s) return Error{s.error()};
   return folder + "/" + spec.stem;

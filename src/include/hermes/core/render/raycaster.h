@@ -27,6 +27,13 @@ class RayGrid {
 
   int width() const { return w_; }
   int height() const { return h_; }
+  /// Camera-frame ray (x, y, 1) of pixel (u, v).
+  const Eigen::Vector3f& ray(int u, int v) const { return ray_[static_cast<std::size_t>(v) * w_ + u]; }
+  /// Inverse of d(x, y)/d(u, v) at pixel (u, v), row-major (a, b; c, d): turns a
+  /// small normalised image motion into pixels through the lens distortion.
+  const Eigen::Vector4f& pixelsPerNormalised(int u, int v) const {
+    return jinv_[static_cast<std::size_t>(v) * w_ + u];
+  }
 
   static constexpr int kTile = 16;
   struct Tile {
@@ -41,6 +48,7 @@ class RayGrid {
   int w_ = 0, h_ = 0;
   std::vector<Eigen::Vector3f> ray_;   ///< (x, y, 1) per pixel, row-major
   std::vector<float> pix_angle_;       ///< [rad] per pixel
+  std::vector<Eigen::Vector4f> jinv_;  ///< see pixelsPerNormalised
   std::vector<Tile> tiles_;
   int tiles_x_ = 0, tiles_y_ = 0;
 };
@@ -61,6 +69,9 @@ class Raycaster {
   void render(const SE3& T_W_C, RenderOutput* out, bool want_depth = false,
               bool want_face = false) const;
   const RayGrid& rays() const { return rays_; }
+  /// Puts the scene's moving objects where they are at time t [s] (no-op
+  /// without movers); renders until the next call see them there.
+  void placeMovers(double t);
 
  private:
   struct Hit;
