@@ -227,13 +227,16 @@ void GlobalMap::anchorLandmark(const TrajectoryMap& traj, StoredLandmark* lm) {
   lm->anchor = kInvalidId;
 }
 
-std::vector<Vec3> GlobalMap::landmarkPositionsWorld() const {
+std::vector<Vec3> GlobalMap::landmarkPositionsWorld(std::vector<std::uint32_t>* robots) const {
   std::vector<Vec3> out;
+  if (robots) robots->clear();
   for (const auto& [tid, t] : trajectories) {
     if (!t.anchored) continue;
     for (const auto& [id, lm] : t.landmarks) {
       auto k = t.keyframes.find(lm.anchor);
-      if (k != t.keyframes.end()) out.push_back(k->second.T_W_C * lm.p_anchor);
+      if (k == t.keyframes.end()) continue;
+      out.push_back(k->second.T_W_C * lm.p_anchor);
+      if (robots) robots->push_back(t.agent);
     }
   }
   return out;

@@ -61,6 +61,14 @@ Expected<std::vector<std::string>> writeAgentTrajectories(const GlobalMap& map,
   return paths;
 }
 
+std::array<std::uint8_t, 3> robotColour(std::uint32_t robot) {
+  static constexpr std::uint8_t kTab10[10][3] = {
+      {31, 119, 180}, {255, 127, 14}, {44, 160, 44},  {214, 39, 40},  {148, 103, 189},
+      {140, 86, 75},  {227, 119, 194}, {127, 127, 127}, {188, 189, 34}, {23, 190, 207}};
+  const std::uint8_t* c = kTab10[robot % 10];
+  return {c[0], c[1], c[2]};
+}
+
 Status writePly(const std::string& path, const std::vector<Vec3>& points, bool binary) {
   std::ofstream f(path, std::ios::binary);
   if (!f) return Error{"ply: cannot write " + path};

@@ -2,6 +2,7 @@
 // ground truth: frames in, merged world map out.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <set>
@@ -136,8 +137,11 @@ TEST(ServerPipeline, MergesAgentsRejectsFalseLoopsAndWritesOutputs) {
   auto traj = readTumTrajectory(paths->front());
   ASSERT_TRUE(traj.ok());
   EXPECT_GT(traj->size(), 30u);
-  const std::vector<Vec3> points = server->map().landmarkPositionsWorld();
+  std::vector<std::uint32_t> owners;
+  const std::vector<Vec3> points = server->map().landmarkPositionsWorld(&owners);
   EXPECT_GT(points.size(), 1000u);
+  ASSERT_EQ(owners.size(), points.size());  // every robot's landmarks, each with its robot
+  EXPECT_EQ(std::set<std::uint32_t>(owners.begin(), owners.end()).size(), 3u);
   for (bool binary : {false, true}) {
     const std::string ply = dir + (binary ? "/map_bin.ply" : "/map.ply");
     ASSERT_TRUE(writePly(ply, points, binary));
@@ -197,6 +201,15 @@ TEST(ServerPipeline, ParamsReadServerKeys) {
   auto bad = Config::fromString("server:\n  map:\n    rig_neighbours: 0\n", "test");
   ASSERT_TRUE(bad.ok());
   EXPECT_FALSE(p.read(*bad));
+}
+
+TEST(ServerOutputs, RobotColoursMatchTheRvizPathsAndWrap) {
+  // config/rviz/hermes.rviz colours the paths of robots 0, 1, 2 like this.
+  EXPECT_EQ(robotColour(0), (std::array<std::uint8_t, 3>{31, 119, 180}));
+  EXPECT_EQ(robotColour(1), (std::array<std::uint8_t, 3>{255, 127, 14}));
+  EXPECT_EQ(robotColour(2), (std::array<std::uint8_t, 3>{44, 160, 44}));
+  EXPECT_EQ(robotColour(12), robotColour(2));
+  EXPECT_NE(robotColour(3), robotColour(2));
 }
 
 }  // namespace

@@ -71,8 +71,9 @@ class GlobalMap {
   std::size_t keyframeCount() const;
   std::size_t landmarkCount() const;
 
-  /// World positions of the landmarks of anchored trajectories.
-  std::vector<Vec3> landmarkPositionsWorld() const;
+  /// World positions of the landmarks of anchored trajectories; with `robots`,
+  /// also the robot each one belongs to (same order), e.g. to colour by robot.
+  std::vector<Vec3> landmarkPositionsWorld(std::vector<std::uint32_t>* robots = nullptr) const;
   /// Re-derives a landmark's anchor (first observation with a stored keyframe).
   static void anchorLandmark(const TrajectoryMap& traj, StoredLandmark* lm);
 

@@ -2,6 +2,8 @@
 // frame), the global map's landmarks as PLY, and the metrics fragment.
 #pragma once
 
+#include <array>
+#include <cstdint>
 #include <map>
 #include <optional>
 #include <string>
@@ -28,6 +30,10 @@ std::vector<std::pair<std::uint32_t, GlobalPoseUpdate>> globalPoseUpdates(const 
 /// Writes <dir>/agent_<robot>.tum for every anchored agent; returns the paths.
 Expected<std::vector<std::string>> writeAgentTrajectories(
     const GlobalMap& map, const std::string& dir, const std::map<std::uint32_t, SE3>& T_B_C = {});
+
+/// Display colour of a robot (RGB), the same in rviz (config/rviz/hermes.rviz
+/// paths), the global map cloud and the plots: matplotlib's tab10 by robot id.
+std::array<std::uint8_t, 3> robotColour(std::uint32_t robot);
 
 /// PLY point cloud (x y z as float), ascii or binary little endian.
 Status writePly(const std::string& path, const std::vector<Vec3>& points, bool binary);
