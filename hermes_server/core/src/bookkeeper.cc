@@ -209,7 +209,7 @@ Status Bookkeeper::markApplied(RobotId robot, std::uint32_t session, std::uint64
 }
 
 std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotId)>& credibility,
-                                               const std::function<bool(RobotId)>& tied) {
+                                               const std::function<std::size_t(RobotId)>& group) {
   if (world_) return world_;
   std::vector<RobotId> qualified;
   double now = -1;
@@ -219,15 +219,17 @@ std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotI
   }
   if (qualified.empty()) return std::nullopt;
   if (!first_qualified_s_) first_qualified_s_ = now;
+  const auto size = [&](RobotId r) { return group ? std::max<std::size_t>(group(r), 1) : 1; };
+  std::size_t largest = 1;
+  for (RobotId r : qualified) largest = std::max(largest, size(r));
+  const bool all = qualified.size() == agents_.size();
+  const bool waited = params_.anchor_wait_s >= 0 && now - *first_qualified_s_ >= params_.anchor_wait_s;
   std::vector<RobotId> candidates;
-  if (qualified.size() == agents_.size()) {
-    candidates = qualified;
-  } else {
-    if (tied)
-      for (RobotId r : qualified)
-        if (tied(r)) candidates.push_back(r);
-    if (candidates.empty() && params_.anchor_wait_s >= 0 && now - *first_qualified_s_ >= params_.anchor_wait_s)
-      candidates = qualified;
+  if (params_.anchor_wait_s < 0) {  // the old rule: every agent qualified, loops aside
+    if (all) candidates = qualified;
+  } else if (largest > 1 || waited || (all && agents_.size() == 1)) {
+    for (RobotId r : qualified)
+      if (size(r) == largest) candidates.push_back(r);
   }
   if (candidates.empty()) return std::nullopt;
   RobotId best = candidates.front();

@@ -407,12 +407,30 @@ void MapManager::anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A) {
 bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibility) {
   if (!bookkeeper_) return false;
   bool changed = false;
-  const auto tied = [this](RobotId r) {
-    for (const LoopEdge& e : map_.loops)
-      if (e.accepted && e.a.agent != e.b.agent && (e.a.agent == r || e.b.agent == r)) return true;
-    return false;
+  // Groups of robots tied by verified inter-robot loops (union-find), built on
+  // the first question (selectWorld asks only until the world is fixed).
+  std::map<RobotId, RobotId> parent;
+  const auto root = [&parent](RobotId r) {
+    while (parent.count(r) && parent[r] != r) r = parent[r];
+    return r;
   };
-  const auto world = bookkeeper_->selectWorld(credibility, tied);
+  bool grouped = false;
+  const auto group = [&](RobotId r) -> std::size_t {
+    if (!grouped) {
+      grouped = true;
+      for (const LoopEdge& e : map_.loops) {
+        if (!e.accepted || e.a.agent == e.b.agent) continue;
+        parent.emplace(e.a.agent, e.a.agent);
+        parent.emplace(e.b.agent, e.b.agent);
+        parent[root(e.a.agent)] = root(e.b.agent);
+      }
+    }
+    std::size_t n = 0;
+    const RobotId mine = root(r);
+    for (const auto& [robot, up] : parent) n += root(robot) == mine ? 1 : 0;
+    return std::max<std::size_t>(n, 1);
+  };
+  const auto world = bookkeeper_->selectWorld(credibility, group);
   if (!world) return false;
   const AgentStats* ws = bookkeeper_->stats(*world);
   auto wt = map_.trajectories.find({*world, ws ? ws->current_session : 0});

@@ -161,8 +161,8 @@ TEST(Bookkeeper, ASmallRobotDoesNotBlockTheWorldFrame) {
     Bookkeeper bk(bp);
     feed(&bk, 0);
     EXPECT_FALSE(bk.selectWorld(credibility).has_value());
-    EXPECT_FALSE(bk.selectWorld(credibility, [](RobotId) { return false; }).has_value());
-    auto world = bk.selectWorld(credibility, [](RobotId r) { return r == 0 || r == 2; });
+    EXPECT_FALSE(bk.selectWorld(credibility, [](RobotId) { return std::size_t{1}; }).has_value());
+    auto world = bk.selectWorld(credibility, [](RobotId r) { return std::size_t{r == 1 ? 1 : 2}; });
     ASSERT_TRUE(world.has_value());
     EXPECT_EQ(*world, 0u);  // c is more credible but has too few keyframes; b is not tied
   }
@@ -192,9 +192,52 @@ TEST(Bookkeeper, ASmallRobotDoesNotBlockTheWorldFrame) {
   }
 }
 
+// Robots that meet each other define the world, not a more credible one that
+// meets no one yet: fixing the world on robot c as soon as all three qualified
+// left a and b (tied by 59 loops) out of the map of a 30-s demo run.
+TEST(Bookkeeper, TheWorldIsInTheLargestGroupThatLoopsTie) {
+  const Uuid a = uuidFromSeed(30), b = uuidFromSeed(31), c = uuidFromSeed(32);
+  std::map<RobotId, double> cred = {{0, 0.4}, {1, 0.9}, {2, 2.0}};
+  auto credibility = [&](RobotId r) { return cred.at(r); };
+  BookkeeperParams bp;
+  bp.anchor_min_keyframes = 10;
+  bp.anchor_wait_s = 30;
+  auto feed = [&](Bookkeeper* bk) {  // all three qualify at 2 s
+    for (std::uint64_t seq = 0; seq < 3; ++seq)
+      for (const Uuid& u : {a, b, c}) bk->onArrival(arrival(u, 0, seq, 4), seq);
+  };
+  const auto alone = [](RobotId) { return std::size_t{1}; };
+  const auto a_meets_b = [](RobotId r) { return std::size_t{r == 2 ? 1 : 2}; };
+  {
+    Bookkeeper bk(bp);
+    feed(&bk);
+    EXPECT_FALSE(bk.selectWorld(credibility, alone).has_value());  // all qualified, nobody met yet
+    auto world = bk.selectWorld(credibility, a_meets_b);
+    ASSERT_TRUE(world.has_value());
+    EXPECT_EQ(*world, 1u);  // b: the more credible of the pair; c is alone
+  }
+  {  // nobody meets: after the wait, the most credible
+    Bookkeeper bk(bp);
+    feed(&bk);
+    EXPECT_FALSE(bk.selectWorld(credibility, alone).has_value());
+    bk.onArrival(arrival(a, 0, 3, 4), 33.0);
+    auto world = bk.selectWorld(credibility, alone);
+    ASSERT_TRUE(world.has_value());
+    EXPECT_EQ(*world, 2u);
+  }
+  {  // a single robot defines the world as soon as it qualifies
+    Bookkeeper bk(bp);
+    for (std::uint64_t seq = 0; seq < 3; ++seq) bk.onArrival(arrival(a, 0, seq, 4), seq);
+    auto world = bk.selectWorld(credibility, alone);
+    ASSERT_TRUE(world.has_value());
+    EXPECT_EQ(*world, 0u);
+  }
+}
+
 TEST(Bookkeeper, WorldFrameAfterThirtyKeyframesEachThenLoopsAnchorOthers) {
   BookkeeperParams bp;
   bp.anchor_min_keyframes = 30;
+  bp.anchor_wait_s = -1;  // the oldest rule: once every agent qualified
   Bookkeeper bk(bp);
   const Uuid a = uuidFromSeed(10), b = uuidFromSeed(11), c = uuidFromSeed(12);
   std::map<RobotId, double> cred = {{0, 0.4}, {1, 0.9}, {2, 0.6}};

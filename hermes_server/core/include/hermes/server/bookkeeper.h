@@ -22,13 +22,19 @@
 //   rejected    unknown agent while registration is required, or a malformed
 //               header (e.g. nil uuid): do not acknowledge
 //
-// Global frame: selectWorld() makes the most credible agent's frame the world frame
-// (T_W_A = identity, anchored) among the agents that have accepted >=
-// anchor_min_keyframes keyframes ("qualified"), once (a) every known agent is
-// qualified, or (b) a verified loop ties a qualified agent to another agent (a map
-// can merge: a robot that stays small, or stopped early, no longer blocks everyone),
-// or (c) anchor_wait_s passed since the first agent qualified (the latest arrival
-// time is the clock; the wait restarts after a checkpoint restore). Another agent is anchored by markAnchored(agent,
+// Global frame: selectWorld() fixes the world frame (T_W_A = identity, anchored)
+// on one of the agents that have accepted >= anchor_min_keyframes keyframes
+// ("qualified"): among the qualified agents of the largest group that verified
+// inter-robot loops tie together (a map that can merge at once; a robot alone is a
+// group of one), the most credible. It is fixed once (a) a verified loop ties a
+// qualified agent to another (a robot that stays small or stopped early no longer
+// blocks everyone), or (b) anchor_wait_s passed since the first agent qualified
+// (the latest arrival time is the clock; the wait restarts after a checkpoint
+// restore), or (c) the only agent known qualifies. Fixing it as soon as every
+// agent qualified, before any loop, could pick a robot that meets no one soon and
+// leave the robots that already meet each other out of the map. anchor_wait_s < 0
+// keeps the oldest rule: once every agent qualified, the most credible, loops
+// aside. Another agent is anchored by markAnchored(agent,
 // T_W_A) when a verified loop ties it to an anchored agent.
 #pragma once
 
@@ -145,11 +151,12 @@ class Bookkeeper {
   }
 
   /// Fixes the world frame by the rule above: the candidate with the highest
-  /// credibility (ties: lowest robot id) is anchored with T_W_A = identity. `tied(r)`
-  /// says whether a verified loop ties agent r to another agent (may be empty).
-  /// Returns the world agent (also when it was fixed before), nullopt while waiting.
+  /// credibility (ties: lowest robot id) is anchored with T_W_A = identity.
+  /// `group(r)`: how many agents verified inter-robot loops tie together with
+  /// agent r, r included (empty function: every agent alone). Returns the world
+  /// agent (also when it was fixed before), nullopt while waiting.
   std::optional<RobotId> selectWorld(const std::function<double(RobotId)>& credibility,
-                                     const std::function<bool(RobotId)>& tied = nullptr);
+                                     const std::function<std::size_t(RobotId)>& group = nullptr);
   /// Anchors (or re-anchors) an agent whose frame a verified loop tied to the world.
   Status markAnchored(RobotId robot, const SE3& T_W_A);
   std::optional<RobotId> worldAgent() const { return world_; }
