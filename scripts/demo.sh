@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # ./hermes demo: the whole system on one machine, no downloads but Debian packages.
-# Installs what is missing, builds the ROS-free tools, renders three overlapping
-# robots in one synthetic hall (EuRoC MH_01..03 ground-truth trajectories; cached
-# in data_cache/demo after the first run), runs the three agents and the edge
+# Installs what is missing (the ROS-free core packages), builds the ROS-free tools,
+# renders three robots in one synthetic hall (EuRoC MH_01..03 ground-truth
+# trajectories from 20 s, where they fly: 2, 7.5 and 39 m in 30 s; cached in
+# data_cache/demo after the first run), runs the three agents and the edge
 # server in one process over ONE emulated 10 Mbit/s link they all share, and
 # prints the report (merged agents, ATE per agent and merged, bytes, kB/s, loops)
 # with the paths of the plots.
@@ -11,17 +12,19 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 HERMES="$ROOT/hermes"
 OUT="$ROOT/results/demo"
 CACHE="$ROOT/data_cache/demo"
-DURATION=15
+START=20
+DURATION=30
 RATE=20
 BANDWIDTH=10
 
 usage() {
   cat <<'H'
-usage: ./hermes demo [--out DIR] [--duration S] [--rate HZ] [--bandwidth MBITPS] [--fresh] [--json]
-  Installs what is missing (apt), builds, renders three overlapping robots (cached in
-  data_cache/demo after the first run), runs 3 agents + the server over one shared
-  emulated link (default 10 Mbit/s) on a simulated clock, prints the report and
-  writes plots under OUT (default results/demo).
+usage: ./hermes demo [--out DIR] [--start S] [--duration S] [--rate HZ] [--bandwidth MBITPS] [--fresh] [--json]
+  Installs what is missing (apt, ROS-free core only), builds, renders three robots
+  (EuRoC MH_01..03 trajectories from --start 20 s for --duration 30 s at --rate 20 Hz;
+  cached in data_cache/demo/s<start>_d<duration>_r<rate> after the first run), runs
+  3 agents + the server over one shared emulated link (default 10 Mbit/s) on a
+  simulated clock, prints the report and writes plots under OUT (default results/demo).
   --fresh: render again.  --json: print the metrics JSON instead of the report.
 H
 }
@@ -31,6 +34,7 @@ while [[ $# -gt 0 ]]; do
   case "$1" in
     --help|-h) usage; exit 0 ;;
     --out) OUT="$2"; shift 2 ;;
+    --start) START="$2"; shift 2 ;;
     --duration) DURATION="$2"; shift 2 ;;
     --rate) RATE="$2"; shift 2 ;;
     --bandwidth) BANDWIDTH="$2"; shift 2 ;;
@@ -49,13 +53,16 @@ echo "[demo] set-up and build (ROS-free tools; first time: several minutes)"
 BIN="$ROOT/build-noros/bin"
 mkdir -p "$OUT" "$CACHE"
 
-KEY="d${DURATION}_r${RATE}"
+for v in "$START" "$DURATION" "$RATE" "$BANDWIDTH"; do
+  [[ "$v" =~ ^[0-9]+([.][0-9]+)?$ ]] || { echo "hermes demo: '$v' is not a number (see --help)" >&2; exit 2; }
+done
+KEY="s${START}_d${DURATION}_r${RATE}"
 if [[ $FRESH -eq 1 || ! -f "$CACHE/$KEY.done" ]]; then
-  echo "[demo] rendering 3 robots x ${DURATION} s at ${RATE} Hz (cached afterwards)"
+  echo "[demo] rendering 3 robots x ${DURATION} s from ${START} s at ${RATE} Hz (cached afterwards)"
   rm -rf "${CACHE:?}/$KEY"
   "$BIN/hermes_sim" --trajectory "$GT_DIR/MH_01_easy.txt" --trajectory "$GT_DIR/MH_02_easy.txt" \
     --trajectory "$GT_DIR/MH_03_medium.txt" --out "$CACHE/$KEY" --format euroc \
-    --duration "$DURATION" --rate "$RATE" --seed 1 2>&1 | tr '\r' '\n' | grep -E 'render [0-9.]+ pairs/s' || true
+    --start "$START" --duration "$DURATION" --rate "$RATE" --seed 1 2>&1 | tr '\r' '\n' | grep -E 'render [0-9.]+ pairs/s' || true
   touch "$CACHE/$KEY.done"
 else
   echo "[demo] using cached rendering $CACHE/$KEY"

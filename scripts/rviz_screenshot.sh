@@ -8,8 +8,8 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 OUT="$ROOT/results/rviz/merged.png"
-WAIT=110
-DATA="$ROOT/data_cache/demo/d15_r20"
+WAIT=150
+DATA="$ROOT/data_cache/demo/s20_d30_r20"
 RATE=0.25
 while [[ $# -gt 0 ]]; do
   case "$1" in
