@@ -100,12 +100,14 @@ TEST(ServerWorker, AcknowledgesWhileAMergeRuns) {
   ServerWorker worker(std::move(server), ServerWorkerParams{}, [] { return 1.0; });
   const auto frames = schedule();
   ASSERT_GE(frames.size(), 4u);
-  ASSERT_EQ(worker.onFrame(frames[0]->data(), frames[0]->size(), nullptr, 1.0).verdict,
-            ArrivalVerdict::kAccept);
-  ASSERT_TRUE(gate.waitEntered()) << "the first submap's merge never started";
-  // The merge is held; the rest arrive now and each gets its verdict at once.
+  // The first submap's merge is held at the gate; the rest arrive meanwhile
+  // and each must get its verdict at once (on another thread than the test's,
+  // so that an acknowledgement that waits for the merge fails the test instead
+  // of hanging it).
   auto acks = std::async(std::launch::async, [&] {
     std::vector<ReceiveResult> out;
+    out.push_back(worker.onFrame(frames[0]->data(), frames[0]->size(), nullptr, 1.0));
+    if (!gate.waitEntered()) return out;  // the merge never started
     for (std::size_t i = 1; i < frames.size(); ++i)
       out.push_back(worker.onFrame(frames[i]->data(), frames[i]->size(), nullptr, 1.0 + i));
     out.push_back(worker.onFrame(frames[1]->data(), frames[1]->size(), nullptr, 99.0));  // a resend
@@ -117,8 +119,9 @@ TEST(ServerWorker, AcknowledgesWhileAMergeRuns) {
   ASSERT_TRUE(answered) << "acknowledgements waited for the merge";
   EXPECT_TRUE(merge_still_held);
   const std::vector<ReceiveResult> results = acks.get();
+  ASSERT_EQ(results.size(), frames.size() + 1) << "the first submap's merge never started";
   for (std::size_t i = 0; i + 1 < results.size(); ++i)
-    EXPECT_EQ(results[i].verdict, ArrivalVerdict::kAccept) << "frame " << i + 1 << ": " << results[i].reason;
+    EXPECT_EQ(results[i].verdict, ArrivalVerdict::kAccept) << "frame " << i << ": " << results[i].reason;
   EXPECT_EQ(results.back().verdict, ArrivalVerdict::kDuplicate);
   EXPECT_TRUE(results.back().acknowledge);
   worker.waitIdle();
