@@ -139,7 +139,9 @@ class ServerNode {
     wp.parallel = parallel;
     worker_ = std::make_unique<ServerWorker>(
         std::move(server), wp, [] { return ros::WallTime::now().toSec(); },
-        [this](const MergedView& v) { publishGlobalPoses(v); });
+        [this](const MergedView& v) {
+          if (ros::ok()) publishGlobalPoses(v);  // not once ROS shuts down (finish() stops the thread)
+        });
     if (mqtt_) {
       mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), [this](const ros::WallTimerEvent&) { onMqtt(); });
     } else {
@@ -159,8 +161,8 @@ class ServerNode {
   /// writes the results folder.
   void finish() {
     worker_->stop();
-    worker_->process(ros::WallTime::now().toSec());
     Server& server = worker_->server();
+    server.process(ros::WallTime::now().toSec());  // ROS is shut down: nothing published
     if (auto s = server.mapManager().optimize(/*full=*/true); !s)
       ROS_WARN("hermes_server: final optimisation: %s", s.error().c_str());
     if (auto s = server.checkpoint(ros::WallTime::now().toSec()); !s)
