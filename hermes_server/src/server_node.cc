@@ -12,9 +12,21 @@
 //        /hermes/loops (visualization_msgs/Marker LINE_LIST of accepted loops)
 //        TF world -> hermes_origin (1 Hz), so the fixed frame exists; the robots'
 //        own nodelets publish world -> <robot>/odom from /hermes/global_pose
-// Threading: one spinner thread; acks are sent in the submap callback, merging
-// runs from a timer one submap per tick, so an ack waits at most one merge.
-// Params: ~config (YAML, default config/hermes.yaml of the source tree),
+// Threading (~parallel, default true): the ROS-free ServerWorker
+// (hermes/server/server_worker.h) merges on a thread of its own, one submap at
+// a time; the one spinner thread runs the callbacks: a submap callback (or the
+// MQTT poll) gets the verdict from the worker and sends the ack at once -
+// decode, auth, admission and the journal write, never a merge. After every
+// merge the merge thread publishes /hermes/global_pose (roscpp publishers are
+// thread-safe) from the view the worker made of the map; the 1 Hz timer
+// publishes status, paths, map and loops from the newest view, so no callback
+// reads the map while it is merged. The status JSON's timings_ms.ack_latency
+// is receive (roscpp's receipt time; for MQTT the poll) -> ack published [ms].
+// ~parallel false: no merge thread, a ~process_period timer merges one submap
+// per tick on the spinner thread (the old behaviour: an ack can wait a merge).
+// At shutdown the merge thread finishes the merge it runs and stops; the node
+// merges what is queued, optimises and writes the results.
+// Params: ~config (YAML, default config/hermes.yaml of the source tree), ~parallel,
 // ~output_dir (written at shutdown: TUM trajectories, PLY, metrics.json),
 // ~process_period [s] (0.05), ~auth (bool: overrides server.auth.enabled;
 // server.launch sets true), ~key_dir (overrides server.auth.key_dir). With
@@ -27,7 +39,7 @@
 // ~mqtt_port (override mqtt.host / mqtt.port): with mqtt the submaps and
 // heartbeats come from hermes/+/submap and hermes/+/heartbeat through the broker
 // and every ack goes to hermes/<robot>/ack (hermes_transport/mqtt_links.h),
-// handled by a 20 ms wall timer on the spinner thread; /hermes/submap,
+// polled by a 20 ms wall timer on the spinner thread; /hermes/submap,
 // /hermes/heartbeat and /hermes/submap_ack are then not used. An unreachable
 // broker is reported and tried again with backoff.
 #include <hermes_msgs/AgentHeartbeat.h>
@@ -49,11 +61,14 @@
 #include "hermes/agent/run_config.h"
 #include "hermes/server/server.h"
 #include "hermes/server/server_outputs.h"
+#include "hermes/server/server_worker.h"
 #include "hermes/transport/mqtt_links.h"
 
 namespace {
 
+using hermes::server::MergedView;
 using hermes::server::Server;
+using hermes::server::ServerWorker;
 
 hermes_msgs::SubmapAck makeAck(const hermes_msgs::EncodedSubmap& m, const hermes::ReceiveResult& r) {
   hermes_msgs::SubmapAck ack;
@@ -112,13 +127,21 @@ sensor_msgs::PointCloud2 toCloud(const std::vector<hermes::Vec3>& points, const 
 
 class ServerNode {
  public:
-  ServerNode(std::unique_ptr<Server> server, std::string output_dir, double period,
+  ServerNode(std::unique_ptr<Server> server, bool parallel, std::string output_dir, double period,
              std::unique_ptr<hermes::transport::MqttServerLink> mqtt)
-      : server_(std::move(server)), output_dir_(std::move(output_dir)), mqtt_(std::move(mqtt)) {
+      : output_dir_(std::move(output_dir)), mqtt_(std::move(mqtt)) {
     ros::NodeHandle nh;
     status_pub_ = nh.advertise<std_msgs::String>("/hermes/status", 10, true);
     map_pub_ = nh.advertise<sensor_msgs::PointCloud2>("/hermes/global_map", 1, true);
     loops_pub_ = nh.advertise<visualization_msgs::Marker>("/hermes/loops", 1, true);
+    global_pub_ = nh.advertise<hermes_msgs::GlobalPose>("/hermes/global_pose", 100);
+    hermes::server::ServerWorkerParams wp;
+    wp.parallel = parallel;
+    worker_ = std::make_unique<ServerWorker>(
+        std::move(server), wp, [] { return ros::WallTime::now().toSec(); },
+        [this](const MergedView& v) {
+          if (ros::ok()) publishGlobalPoses(v);  // not once ROS shuts down (finish() stops the thread)
+        });
     if (mqtt_) {
       mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), [this](const ros::WallTimerEvent&) { onMqtt(); });
     } else {
@@ -126,58 +149,59 @@ class ServerNode {
       submap_sub_ = nh.subscribe("/hermes/submap", 100, &ServerNode::onSubmap, this);
       hb_sub_ = nh.subscribe("/hermes/heartbeat", 10, &ServerNode::onHeartbeat, this);
     }
-    global_pub_ = nh.advertise<hermes_msgs::GlobalPose>("/hermes/global_pose", 100);
-    process_timer_ = nh.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent&) {
-      if (server_->process(ros::WallTime::now().toSec(), 1) > 0) {
-        dirty_ = true;
-        publishGlobalPoses();
-      }
-    });
+    if (!parallel)
+      process_timer_ = nh.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent&) {
+        worker_->process(ros::WallTime::now().toSec(), 1);
+      });
     publish_timer_ = nh.createWallTimer(ros::WallDuration(1.0),
                                         [this](const ros::WallTimerEvent&) { publishOutputs(); });
   }
 
-  /// Merges what is left, optimises once more and writes the results folder.
+  /// Stops the merge thread, merges what is left, optimises once more and
+  /// writes the results folder.
   void finish() {
-    server_->process(ros::WallTime::now().toSec());
-    if (auto s = server_->mapManager().optimize(/*full=*/true); !s)
+    worker_->stop();
+    Server& server = worker_->server();
+    server.process(ros::WallTime::now().toSec());  // ROS is shut down: nothing published
+    if (auto s = server.mapManager().optimize(/*full=*/true); !s)
       ROS_WARN("hermes_server: final optimisation: %s", s.error().c_str());
-    if (auto s = server_->checkpoint(ros::WallTime::now().toSec()); !s)
+    if (auto s = server.checkpoint(ros::WallTime::now().toSec()); !s)
       ROS_ERROR("hermes_server: last checkpoint: %s", s.error().c_str());
     if (output_dir_.empty()) return;
     std::error_code ec;
     std::filesystem::create_directories(output_dir_, ec);
-    auto paths = hermes::server::writeAgentTrajectories(server_->map(), output_dir_);
+    auto paths = hermes::server::writeAgentTrajectories(server.map(), output_dir_);
     if (!paths.ok()) ROS_ERROR("hermes_server: %s", paths.error().c_str());
     if (auto s = hermes::server::writePly(output_dir_ + "/global_map.ply",
-                                          server_->map().landmarkPositionsWorld(), true);
+                                          server.map().landmarkPositionsWorld(), true);
         !s)
       ROS_ERROR("hermes_server: %s", s.error().c_str());
-    if (auto s = server_->map().save(output_dir_ + "/global_map.hgm"); !s)
+    if (auto s = server.map().save(output_dir_ + "/global_map.hgm"); !s)
       ROS_ERROR("hermes_server: %s", s.error().c_str());
-    if (auto s = hermes::writeMetricsJson(output_dir_ + "/metrics.json",
-                                          hermes::server::serverMetrics(*server_));
-        !s)
+    if (auto s = hermes::writeMetricsJson(output_dir_ + "/metrics.json", worker_->metrics()); !s)
       ROS_ERROR("hermes_server: %s", s.error().c_str());
     ROS_INFO("hermes_server: results written to %s", output_dir_.c_str());
   }
 
  private:
-  void onSubmap(const hermes_msgs::EncodedSubmapConstPtr& m) {
+  void onSubmap(const ros::MessageEvent<const hermes_msgs::EncodedSubmap>& event) {
+    const hermes_msgs::EncodedSubmap& m = *event.getConstMessage();
     hermes::SubmapHeader claimed;
-    const bool have_uuid = hermes::parseUuid(m->agent_uuid, &claimed.agent);
-    claimed.session = m->session;
-    claimed.seq = m->seq;
-    const auto r = server_->onFrame(m->data.data(), m->data.size(), have_uuid ? &claimed : nullptr,
+    const bool have_uuid = hermes::parseUuid(m.agent_uuid, &claimed.agent);
+    claimed.session = m.session;
+    claimed.seq = m.seq;
+    const auto r = worker_->onFrame(m.data.data(), m.data.size(), have_uuid ? &claimed : nullptr,
                                     ros::WallTime::now().toSec());
     if (r.verdict == hermes::ArrivalVerdict::kRejected)
       ROS_WARN_THROTTLE(1.0, "hermes_server: rejected submap from '%s' seq %lu: %s",
-                        m->agent_uuid.c_str(), static_cast<unsigned long>(m->seq), r.reason.c_str());
-    ack_pub_.publish(makeAck(*m, r));  // rejections are answered too, with the reason
+                        m.agent_uuid.c_str(), static_cast<unsigned long>(m.seq), r.reason.c_str());
+    ack_pub_.publish(makeAck(m, r));  // rejections are answered too, with the reason
+    worker_->recordAckLatency((ros::Time::now() - event.getReceiptTime()).toSec() * 1e3);
   }
 
   /// MQTT: every frame received since the last tick, answered on its robot's ack topic.
   void onMqtt() {
+    const ros::WallTime polled = ros::WallTime::now();
     hermes::transport::ServerLinkEvents ev = mqtt_->poll();
     for (const std::string& p : ev.problems) ROS_WARN_THROTTLE(1.0, "hermes_server: mqtt: %s", p.c_str());
     for (const hermes::transport::HeartbeatMessage& hb : ev.heartbeats)
@@ -187,8 +211,9 @@ class ServerNode {
       const double now = ros::WallTime::now().toSec();
       const hermes::ReceiveResult r =
           mqtt_->handle(f, [&](const std::uint8_t* d, std::size_t n, const hermes::SubmapHeader* claimed) {
-            return server_->onFrame(d, n, claimed, now);
+            return worker_->onFrame(d, n, claimed, now);
           });
+      worker_->recordAckLatency((ros::WallTime::now() - polled).toSec() * 1e3);
       if (r.verdict == hermes::ArrivalVerdict::kRejected)
         ROS_WARN_THROTTLE(1.0, "hermes_server: rejected submap on hermes/%s/submap seq %lu: %s", f.agent.c_str(),
                           static_cast<unsigned long>(r.routing.seq), r.reason.c_str());
@@ -200,17 +225,17 @@ class ServerNode {
       ROS_INFO("hermes_server: agent %s is '%s'", h->agent_uuid.c_str(), h->name.c_str());
   }
 
-  /// After a merge: every anchored robot's current session hears its world <- odom.
-  void publishGlobalPoses() {
+  /// After a merge (on the merge thread) and once a second: every anchored
+  /// robot's current session hears its world <- odom.
+  void publishGlobalPoses(const MergedView& view) {
     const ros::Time now = ros::Time::now();
-    for (const auto& [robot, u] : hermes::server::globalPoseUpdates(server_->map())) {
-      const hermes::AgentStats* st = server_->bookkeeper().stats(robot);
-      if (!st || st->current_session != u.session) continue;
+    for (const MergedView::RobotPose& rp : view.poses) {
+      const hermes::GlobalPoseUpdate& u = rp.update;
       hermes_msgs::GlobalPose m;
       m.header.stamp = now;
       m.header.frame_id = "world";
-      m.agent_uuid = hermes::toString(st->uuid);
-      m.robot_id = robot;
+      m.agent_uuid = hermes::toString(rp.uuid);
+      m.robot_id = rp.robot;
       m.session = u.session;
       m.keyframe_stamp = u.keyframe_stamp;
       m.keyframes = u.keyframes;
@@ -233,25 +258,18 @@ class ServerNode {
   }
 
   void publishOutputs() {
-    publishGlobalPoses();  // also once a second: a robot that (re)connects hears it
+    const std::shared_ptr<const MergedView> view = worker_->view();
+    publishGlobalPoses(*view);  // also once a second: a robot that (re)connects hears it
     std_msgs::String status;
-    status.data = hermes::metricsToJsonString(hermes::server::serverMetrics(*server_), -1);
+    status.data = hermes::metricsToJsonString(worker_->metrics(), -1);
     status_pub_.publish(status);
-    if (!dirty_) {
-      std_msgs::Header h;
-      h.frame_id = "world";
-      h.stamp = ros::Time::now();
-      publishFrames(h);
-      return;
-    }
-    dirty_ = false;
-    const hermes::server::GlobalMap& map = server_->map();
     std_msgs::Header h;
     h.frame_id = "world";
     h.stamp = ros::Time::now();
-    for (hermes::RobotId r : server_->bookkeeper().robots()) {
-      const hermes::Trajectory traj = hermes::server::agentTrajectory(map, r);
-      if (traj.empty()) continue;
+    publishFrames(h);
+    if (view->version == published_version_) return;  // the map did not change
+    published_version_ = view->version;
+    for (const auto& [r, traj] : view->paths) {
       nav_msgs::Path path;
       path.header = h;
       for (const hermes::StampedPose& p : traj) {
@@ -269,8 +287,7 @@ class ServerNode {
                  .first;
       it->second.publish(path);
     }
-    map_pub_.publish(toCloud(map.landmarkPositionsWorld(), h));
-    publishFrames(h);
+    map_pub_.publish(toCloud(view->landmarks, h));
     visualization_msgs::Marker loops;
     loops.header = h;
     loops.ns = "loops";
@@ -279,19 +296,13 @@ class ServerNode {
     loops.color.r = 1.0;
     loops.color.a = 1.0;
     loops.pose.orientation.w = 1.0;
-    for (const hermes::server::LoopEdge& l : map.loops) {
-      const auto* a = map.keyframe(l.a);
-      const auto* b = map.keyframe(l.b);
-      const auto* ta = map.trajectory(l.a.agent, l.a.session);
-      const auto* tb = map.trajectory(l.b.agent, l.b.session);
-      if (!l.accepted || !a || !b || !ta || !tb || !ta->anchored || !tb->anchored) continue;
-      loops.points.push_back(toPoint(a->T_W_C.translation()));
-      loops.points.push_back(toPoint(b->T_W_C.translation()));
+    for (const auto& [a, b] : view->loops) {
+      loops.points.push_back(toPoint(a));
+      loops.points.push_back(toPoint(b));
     }
     loops_pub_.publish(loops);
   }
 
-  std::unique_ptr<Server> server_;
   std::string output_dir_;
   std::unique_ptr<hermes::transport::MqttServerLink> mqtt_;  ///< set: transport mqtt
   ros::WallTimer mqtt_timer_;
@@ -301,7 +312,8 @@ class ServerNode {
   ros::Subscriber submap_sub_, hb_sub_;
   ros::WallTimer process_timer_, publish_timer_;
   tf2_ros::TransformBroadcaster tf_;
-  bool dirty_ = true;  ///< the map changed since it was last published (a resumed server holds one)
+  std::uint64_t published_version_ = 0;  ///< view last published (0: none; a resumed server holds a map)
+  std::unique_ptr<ServerWorker> worker_;  ///< last: its merge thread ends first (publishes with the above)
 };
 
 }  // namespace
@@ -312,7 +324,9 @@ int main(int argc, char** argv) {
   std::string config_file = std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", output_dir;
   std::string checkpoint_dir;
   double period = 0.05;
+  bool parallel = true;
   pnh.param("config", config_file, config_file);
+  pnh.param("parallel", parallel, parallel);
   pnh.param("output_dir", output_dir, output_dir);
   pnh.param("process_period", period, period);
   // ~auth / ~key_dir (launch arguments; on by default there) override the config.
@@ -377,10 +391,10 @@ int main(int argc, char** argv) {
              resume.checkpoint.empty() ? "the journal" : resume.checkpoint.c_str(),
              resume.journal_replayed, resume.load_ms, (*server)->bookkeeper().robots().size(),
              (*server)->pending());
-  ServerNode node(std::move(*server), output_dir, period, std::move(mqtt));
+  ServerNode node(std::move(*server), parallel, output_dir, period, std::move(mqtt));
   const std::string auth = params.auth.enabled ? "on, keys in " + params.auth.key_dir : "OFF";
-  ROS_INFO("hermes_server: ready (config %s; authentication %s%s%s)", config_file.c_str(),
-           auth.c_str(), params.checkpoint.enabled() ? "; checkpoints in " : "",
+  ROS_INFO("hermes_server: ready (config %s; merging %s; authentication %s%s%s)", config_file.c_str(),
+           parallel ? "on its own thread" : "on the spinner thread", auth.c_str(), params.checkpoint.enabled() ? "; checkpoints in " : "",
            params.checkpoint.dir.c_str());
   ros::spin();
   node.finish();

@@ -406,6 +406,8 @@ void MapManager::anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A) {
 
 bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibility) {
   if (!bookkeeper_) return false;
+  std::unique_lock<std::mutex> shared;  // see setBookkeeperLock()
+  if (bookkeeper_lock_) shared = std::unique_lock<std::mutex>(*bookkeeper_lock_);
   bool changed = false;
   // Groups of robots tied by verified inter-robot loops (union-find), built on
   // the first question (selectWorld asks only until the world is fixed).

@@ -78,10 +78,17 @@ Server::Server(const ServerParams& params, std::shared_ptr<const Vocabulary> voc
                                }}) {
   HERMES_CHECK(params_.auth.enabled == keyring_.has_value(),
                "server: a keyring is needed exactly when server.auth.enabled");
+  map_.setBookkeeperLock(&intake_mu_);
+}
+
+std::size_t Server::pending() const {
+  std::lock_guard<std::mutex> lock(intake_mu_);
+  return queue_.size();
 }
 
 ReceiveResult Server::onFrame(const std::uint8_t* data, std::size_t size,
                               const SubmapHeader* claimed, double now) {
+  std::lock_guard<std::mutex> lock(intake_mu_);
   receiving_ = data;  // the sink keeps a copy of an accepted frame
   receiving_size_ = size;
   struct Clear {
@@ -123,20 +130,32 @@ ReceiveResult Server::receiveJournaled(const std::uint8_t* data, std::size_t siz
   return r;
 }
 
+bool Server::takeNext(double now, std::optional<ReceivedSubmap>* next) {
+  std::lock_guard<std::mutex> lock(intake_mu_);
+  next->reset();
+  if (queue_.empty()) return false;
+  queue_.updateFrom(bookkeeper_, [this](RobotId r) { return map_.hasLoops(r); });
+  const auto record = queue_.pop(now);
+  if (!record) return false;
+  auto it = stored_.find(record->item.handle);
+  if (it == stored_.end()) return true;
+  *next = std::move(it->second.submap);
+  stored_.erase(it);
+  quotas_.release((*next)->robot, (*next)->bytes);
+  return true;
+}
+
 int Server::process(double now, int max_submaps) {
   int merged = 0, popped = 0;
+  // Called while the map manager anchors, which holds the intake lock then.
   const auto credibility = [this](RobotId r) { return queue_.score(r).c; };
-  while (!queue_.empty() && (max_submaps < 0 || merged < max_submaps)) {
+  std::optional<ReceivedSubmap> next;
+  while (max_submaps < 0 || merged < max_submaps) {
     const auto t0 = std::chrono::steady_clock::now();
-    queue_.updateFrom(bookkeeper_, [this](RobotId r) { return map_.hasLoops(r); });
-    const auto record = queue_.pop(now);
-    if (!record) break;
-    auto it = stored_.find(record->item.handle);
-    if (it == stored_.end()) continue;
-    ReceivedSubmap r = std::move(it->second.submap);
-    stored_.erase(it);
-    quotas_.release(r.robot, r.bytes);
-    auto stats = map_.merge(r.robot, r.submap, credibility);
+    if (!takeNext(now, &next)) break;
+    if (!next) continue;
+    const ReceivedSubmap& r = *next;
+    auto stats = map_.merge(r.robot, r.submap, credibility);  // without the intake lock
     if (!stats) {
       ++counters_.merge_errors;
       counters_.last_error = stats.error();
@@ -147,7 +166,10 @@ int Server::process(double now, int max_submaps) {
       counters_.extensions_unknown += static_cast<std::size_t>(stats->extensions_unknown);
       counters_.loops_reverified += static_cast<std::size_t>(stats->loops_reverified);
     }
-    (void)bookkeeper_.markApplied(r.robot, r.submap.header.session, r.submap.header.seq);
+    {
+      std::lock_guard<std::mutex> lock(intake_mu_);
+      (void)bookkeeper_.markApplied(r.robot, r.submap.header.session, r.submap.header.seq);
+    }
     timings_.add("submap", std::chrono::duration<double, std::milli>(
                                std::chrono::steady_clock::now() - t0)
                                .count());
@@ -167,18 +189,22 @@ TimingStats Server::timings() const {
 Status Server::checkpoint(double now) {
   if (!store_) return Status::Ok();
   const auto t0 = std::chrono::steady_clock::now();
-  const std::vector<std::uint8_t> body = saveState();
+  std::vector<SubmapHeader> covers;
+  const std::vector<std::uint8_t> body = encodeState(&covers);
+  // Outside the intake lock: only this thread writes checkpoint files, and the
+  // journal (written meanwhile by onFrame) lives in other files.
   auto written = store_->write(body);
+  std::lock_guard<std::mutex> lock(intake_mu_);
   if (!written) {
     ++durability_.checkpoint_errors;
     durability_.last_error = written.error();
+    journaled_.insert(journaled_.begin(), covers.begin(), covers.end());  // not covered after all
     return Error{written.error()};
   }
-  // Everything accepted so far is in this checkpoint (merged or pending). A
-  // journal entry goes once the oldest checkpoint kept covers it too: falling
-  // back to that one still finds everything accepted after it.
-  covered_.push_back(std::move(journaled_));
-  journaled_.clear();
+  // Everything accepted until the state was copied is in this checkpoint
+  // (merged or pending). A journal entry goes once the oldest checkpoint kept
+  // covers it too: falling back to that one still finds everything accepted after it.
+  covered_.push_back(std::move(covers));
   while (covered_.size() > static_cast<std::size_t>(params_.checkpoint.keep - 1)) {
     for (const SubmapHeader& h : covered_.front()) store_->journalRemove(h);
     covered_.pop_front();

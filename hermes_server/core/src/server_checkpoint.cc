@@ -50,23 +50,46 @@ bool loadCounters(ByteReader* r, ServerCounters* c, ReceiverStats* rs, Durabilit
 
 }  // namespace
 
-std::vector<std::uint8_t> Server::saveState() const {
-  ByteWriter w;
-  bookkeeper_.save(&w);
-  queue_.save(&w);
-  map_.save(&w);
-  w.count(stored_.size());
+void Server::saveIntake(ByteWriter* head, ByteWriter* tail) const {
+  bookkeeper_.save(head);
+  queue_.save(head);
+  // (the map goes here)
+  tail->count(stored_.size());
   for (const auto& [handle, p] : stored_) {
-    w.pod(handle);
-    w.pod(p.submap.robot);
-    w.count(p.submap.bytes);
-    w.pod(p.submap.arrival_time);
-    w.blob(p.frame);
+    tail->pod(handle);
+    tail->pod(p.submap.robot);
+    tail->count(p.submap.bytes);
+    tail->pod(p.submap.arrival_time);
+    tail->blob(p.frame);
   }
-  w.pod(next_handle_);
-  saveCounters(&w, counters_, receiver_.stats(), durability_);
-  saveTimings(&w, timings_);
-  return w.out;
+  tail->pod(next_handle_);
+  saveCounters(tail, counters_, receiver_.stats(), durability_);
+  saveTimings(tail, timings_);
+}
+
+std::vector<std::uint8_t> Server::encodeState(std::vector<SubmapHeader>* covers) {
+  ByteWriter w, tail;
+  {
+    std::lock_guard<std::mutex> lock(intake_mu_);
+    saveIntake(&w, &tail);
+    covers->swap(journaled_);
+  }
+  return withMap(std::move(w), tail);
+}
+
+std::vector<std::uint8_t> Server::saveState() const {
+  ByteWriter w, tail;
+  {
+    std::lock_guard<std::mutex> lock(intake_mu_);
+    saveIntake(&w, &tail);
+  }
+  return withMap(std::move(w), tail);
+}
+
+std::vector<std::uint8_t> Server::withMap(ByteWriter head, const ByteWriter& tail) const {
+  map_.save(&head);
+  head.out.insert(head.out.end(), tail.out.begin(), tail.out.end());
+  return std::move(head.out);
 }
 
 Status Server::loadState(const std::vector<std::uint8_t>& body) {

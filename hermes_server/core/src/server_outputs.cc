@@ -42,6 +42,37 @@ std::vector<std::pair<std::uint32_t, GlobalPoseUpdate>> globalPoseUpdates(const 
   return out;
 }
 
+MergedView mergedView(const Server& server) {
+  MergedView v;
+  const GlobalMap& map = server.map();
+  v.landmarks = map.landmarkPositionsWorld();
+  for (const LoopEdge& l : map.loops) {
+    const StoredKeyframe* a = map.keyframe(l.a);
+    const StoredKeyframe* b = map.keyframe(l.b);
+    const TrajectoryMap* ta = map.trajectory(l.a.agent, l.a.session);
+    const TrajectoryMap* tb = map.trajectory(l.b.agent, l.b.session);
+    if (l.accepted && a && b && ta && tb && ta->anchored && tb->anchored)
+      v.loops.emplace_back(a->T_W_C.translation(), b->T_W_C.translation());
+  }
+  v.metrics = mergeMetrics(server);
+  const auto updates = globalPoseUpdates(map);
+  std::vector<RobotId> robots;
+  {
+    const auto lock = server.lockIntake();
+    const Bookkeeper& bk = server.bookkeeper();
+    for (const auto& [robot, u] : updates) {
+      const AgentStats* st = bk.stats(robot);
+      if (st && st->current_session == u.session) v.poses.push_back({robot, st->uuid, u});
+    }
+    robots = bk.robots();
+  }
+  for (RobotId r : robots) {
+    Trajectory t = agentTrajectory(map, r);
+    if (!t.empty()) v.paths.emplace(r, std::move(t));
+  }
+  return v;
+}
+
 Expected<std::vector<std::string>> writeAgentTrajectories(const GlobalMap& map,
                                                           const std::string& dir,
                                                           const std::map<std::uint32_t, SE3>& T_B_C) {
@@ -134,15 +165,20 @@ void fillHeldLoad(const Server& server, RobotId robot, AgentMetrics* metrics) {
   metrics->held_bytes_peak = static_cast<int64_t>(held ? held->peak_bytes : 0);
 }
 
-RunMetrics serverMetrics(const Server& server) {
+RunMetrics mergeMetrics(const Server& server) {
   RunMetrics m;
   const MapManager& mm = server.mapManager();
   m.loops_accepted = static_cast<int64_t>(mm.loopsAccepted());
   m.loops_rejected = static_cast<int64_t>(mm.loopsRejected());
-  m.agents_merged = mm.agentsMerged();
   m.timings_ms = server.timings().summary();
+  return m;
+}
+
+void addIntakeMetrics(const Server& server, RunMetrics* m) {
+  m->agents_merged = server.mapManager().agentsMerged();  // anchoring lives in the bookkeeper
   const Bookkeeper& bk = server.bookkeeper();
   int64_t bytes = 0;
+  m->per_agent.clear();
   for (RobotId r : bk.robots()) {
     const AgentStats* s = bk.stats(r);
     if (!s) continue;
@@ -154,15 +190,21 @@ RunMetrics serverMetrics(const Server& server) {
     a.submaps_applied = static_cast<int64_t>(s->submaps_applied);
     fillHeldLoad(server, r, &a);
     bytes += a.bytes.value_or(0);
-    m.per_agent.push_back(a);
+    m->per_agent.push_back(a);
   }
-  m.bytes_total = bytes;
+  m->bytes_total = bytes;
   const ReceiverStats& rs = server.receiverStats();
+  m->frames_refused.clear();
   for (std::size_t c = 0; c < kReceiveCodes; ++c) {
     const auto code = static_cast<ReceiveCode>(c);
     if (code != ReceiveCode::kAccepted && rs.by_code[c] > 0)
-      m.frames_refused[toString(code)] = static_cast<int64_t>(rs.by_code[c]);
+      m->frames_refused[toString(code)] = static_cast<int64_t>(rs.by_code[c]);
   }
+}
+
+RunMetrics serverMetrics(const Server& server) {
+  RunMetrics m = mergeMetrics(server);
+  addIntakeMetrics(server, &m);
   return m;
 }
 

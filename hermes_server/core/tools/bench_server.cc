@@ -1,9 +1,14 @@
 // hermes_bench_server: processing time of the server pipeline per submap
 // (median / p95) and per stage, for 3 and 10 simulated agents on EuRoC
 // ground-truth trajectories sharing one hall. Prints JSON (also to --json FILE).
+// With --acks MS: the acknowledgement latency instead (frame due -> verdict
+// back, median / p95 / max [ms]) when the frames arrive every MS milliseconds
+// in real time, for one thread that receives and merges (a ROS node with one
+// spinner, as before issue 17) and for ServerWorker (merging on its thread).
 //
-// Usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints 200]
+// Usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints 200] [--acks MS]
 //                            [--source REPO] [--data SHARED_DATA_DIR] [--set server.KEY=VALUE]
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -13,11 +18,13 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "hermes/core/evaluation.h"
 #include "hermes/server/server.h"
 #include "hermes/server/server_outputs.h"
+#include "hermes/server/server_worker.h"
 // The multi-agent fixture lives with the tests (tools cannot link the test
 // support library without a CMake change); compile it into this tool.
 #include "../test/support/multi_agent_fixture.cc"
@@ -120,12 +127,89 @@ Expected<nlohmann::json> run(int n, int keypoints) {
   return j;
 }
 
+using SteadyClock = std::chrono::steady_clock;
+
+double msBetween(SteadyClock::time_point a, SteadyClock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+nlohmann::json latencySummary(std::vector<double> ms, double wall_s) {
+  const double max = ms.empty() ? 0 : *std::max_element(ms.begin(), ms.end());
+  return {{"median_ms", timing::percentile(ms, 50)}, {"p95_ms", timing::percentile(ms, 95)},
+          {"max_ms", max}, {"frames", ms.size()}, {"wall_s", wall_s}};
+}
+
+/// One thread receives and merges: a frame that falls due during a merge waits for it.
+Expected<nlohmann::json> acksSerial(const std::vector<const std::vector<std::uint8_t>*>& frames,
+                                    double interval_ms) {
+  auto server = Server::create(g_params, g_source_dir);
+  if (!server) return Error{server.error()};
+  Server& s = **server;
+  const auto start = SteadyClock::now();
+  const auto due = [&](std::size_t i) {
+    return start + std::chrono::microseconds(static_cast<std::int64_t>(i * interval_ms * 1e3));
+  };
+  std::vector<double> latency;
+  std::size_t next = 0;
+  while (next < frames.size() || s.pending() > 0) {
+    const auto now = SteadyClock::now();
+    if (next < frames.size() && now >= due(next)) {
+      s.onFrame(frames[next]->data(), frames[next]->size(), nullptr, msBetween(start, now) / 1e3);
+      latency.push_back(msBetween(due(next), SteadyClock::now()));
+      ++next;
+    } else if (s.pending() > 0) {
+      s.process(msBetween(start, now) / 1e3, 1);
+    } else {
+      std::this_thread::sleep_until(due(next));  // idle until the next frame is due
+    }
+  }
+  return latencySummary(latency, msBetween(start, SteadyClock::now()) / 1e3);
+}
+
+/// ServerWorker: frames received on this thread, merged on the worker's.
+Expected<nlohmann::json> acksThreaded(const std::vector<const std::vector<std::uint8_t>*>& frames,
+                                      double interval_ms) {
+  auto server = Server::create(g_params, g_source_dir);
+  if (!server) return Error{server.error()};
+  const auto start = SteadyClock::now();
+  ServerWorker worker(std::move(*server), ServerWorkerParams{},
+                      [start] { return msBetween(start, SteadyClock::now()) / 1e3; });
+  std::vector<double> latency;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const auto due = start + std::chrono::microseconds(static_cast<std::int64_t>(i * interval_ms * 1e3));
+    std::this_thread::sleep_until(due);
+    worker.onFrame(frames[i]->data(), frames[i]->size(), nullptr, msBetween(start, SteadyClock::now()) / 1e3);
+    latency.push_back(msBetween(due, SteadyClock::now()));
+  }
+  worker.waitIdle();
+  return latencySummary(latency, msBetween(start, SteadyClock::now()) / 1e3);
+}
+
+Expected<nlohmann::json> runAcks(int n, int keypoints, double interval_ms) {
+  fixture::Options options;
+  options.keypoints = keypoints;
+  options.landmarks_per_keyframe = n > 3 ? 15 : 40;
+  auto fx = fixture::makeFixture(specsFor(n), options);
+  if (!fx) return Error{fx.error()};
+  const auto frames = fixture::roundRobin(*fx);
+  auto serial = acksSerial(frames, interval_ms);
+  if (!serial) return serial;
+  auto threaded = acksThreaded(frames, interval_ms);
+  if (!threaded) return threaded;
+  return nlohmann::json{{"agents", n},
+                        {"submaps", frames.size()},
+                        {"interval_ms", interval_ms},
+                        {"one_thread", *serial},
+                        {"server_worker", *threaded}};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string json_path;
   std::vector<int> counts = {3, 10};
   int keypoints = 200;
+  double acks_interval_ms = 0;  // > 0: the acknowledgement latency bench
   Config config;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -147,8 +231,10 @@ int main(int argc, char** argv) {
       g_data_dir = argv[++i];
     } else if (a == "--keypoints" && i + 1 < argc) {
       keypoints = std::atoi(argv[++i]);
+    } else if (a == "--acks" && i + 1 < argc) {
+      acks_interval_ms = std::atof(argv[++i]);
     } else {
-      std::cerr << "usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints N] [--source REPO] [--data DIR] [--set server.KEY=VALUE]\n";
+      std::cerr << "usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints N] [--acks MS] [--source REPO] [--data DIR] [--set server.KEY=VALUE]\n";
       return 2;
     }
   }
@@ -169,7 +255,7 @@ int main(int argc, char** argv) {
       std::cerr << "hermes_bench_server: agent count must be >= 1\n";
       return 2;
     }
-    auto r = run(n, keypoints);
+    auto r = acks_interval_ms > 0 ? runAcks(n, keypoints, acks_interval_ms) : run(n, keypoints);
     if (!r) {
       std::cerr << "hermes_bench_server: " << r.error() << "\n";
       return 1;

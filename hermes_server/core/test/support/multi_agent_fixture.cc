@@ -190,6 +190,16 @@ Expected<Fixture> makeFixture(const std::vector<AgentSpec>& specs, const Options
   return fx;
 }
 
+std::vector<const std::vector<std::uint8_t>*> roundRobin(const Fixture& fx) {
+  std::vector<const std::vector<std::uint8_t>*> out;
+  std::size_t rounds = 0;
+  for (const Agent& a : fx.agents) rounds = std::max(rounds, a.frames.size());
+  for (std::size_t r = 0; r < rounds; ++r)
+    for (const Agent& a : fx.agents)
+      if (r < a.frames.size()) out.push_back(&a.frames[r]);
+  return out;
+}
+
 }  // namespace fixture
 }  // namespace server
 }  // namespace hermes

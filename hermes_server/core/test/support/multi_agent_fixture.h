@@ -52,6 +52,9 @@ struct Fixture {
 
 Expected<Fixture> makeFixture(const std::vector<AgentSpec>& specs, const Options& options);
 
+/// The agents' frames round-robin (first of each, second of each, ...), as sent.
+std::vector<const std::vector<std::uint8_t>*> roundRobin(const Fixture& fx);
+
 }  // namespace fixture
 }  // namespace server
 }  // namespace hermes

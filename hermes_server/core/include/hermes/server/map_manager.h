@@ -7,6 +7,7 @@
 
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <set>
 #include <string>
@@ -139,7 +140,8 @@ class MapManager {
   std::size_t loopsAccepted() const;
   std::size_t loopsRejected() const;
   bool hasLoops(RobotId robot) const;
-  /// Agents (current sessions) anchored in the world frame.
+  /// Agents (current sessions) anchored in the world frame (reads the
+  /// bookkeeper: with a bookkeeper lock, call with it held).
   int agentsMerged() const;
   /// Checkpoint (server_checkpoint.h): map, odometry chain, place database
   /// order, loop ids, world trajectory, solve counters, timings. The PCM cache
@@ -151,6 +153,12 @@ class MapManager {
   void setCandidateHook(CandidateHook h) { candidate_hook_ = std::move(h); }
   void setLoopHook(LoopHook h) { loop_hook_ = std::move(h); }
   void setAttemptHook(AttemptHook h) { attempt_hook_ = std::move(h); }
+  /// The bookkeeper is shared with a thread that receives frames and changes
+  /// it under `lock` (Server, server_worker.h): merge() holds `lock` while it
+  /// anchors agents (world selection, markAnchored; credibility is called
+  /// there, under it), the only time a merge touches the bookkeeper. Short:
+  /// loops over trajectories and loops, no solve. nullptr: not shared.
+  void setBookkeeperLock(std::mutex* lock) { bookkeeper_lock_ = lock; }
 
  private:
   /// Stores the window's new keyframes (`added`) and landmarks; keyframe
@@ -193,6 +201,7 @@ class MapManager {
   std::shared_ptr<const Vocabulary> vocabulary_;
   MapManagerParams params_;
   Bookkeeper* bookkeeper_;
+  std::mutex* bookkeeper_lock_ = nullptr;
   PlaceRecognizer recognizer_;
   LoopCloser closer_;
   OdometryChain chain_;

@@ -12,12 +12,28 @@
 // never a silent empty start), then queues again what the journal holds beyond
 // it. Agents resend what was never acknowledged; the restored bookkeeper drops
 // what it had already accepted: nothing lost, nothing applied twice.
+//
+// Threads (server_worker.h runs process() on a thread of its own): onFrame()
+// may be called from one receiving thread while one other thread runs
+// process(). They share the intake state - bookkeeper, credibility queue,
+// pending submaps, per-robot quotas, receiver stats, journal, durability
+// stats - guarded by one mutex (intake): onFrame() holds it throughout (decode,
+// auth, admission, journal write, queueing); process() holds it only to take
+// the next submap out of the queue, to mark it applied, while the map manager
+// anchors agents (MapManager::setBookkeeperLock) and while a checkpoint copies
+// the intake state (the map is encoded and the file written outside it). The
+// merge itself (loops, PCM, pose graph) runs without it. The map manager,
+// counters() and timings() belong to the thread running process(): read them
+// there or while none runs. The intake accessors (bookkeeper(), credibility(),
+// receiverStats(), heldLoad()) from a third thread need lockIntake() held.
+// Without a second thread the mutex is never contended: results are the same.
 #pragma once
 
 #include <cstdint>
 #include <deque>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -99,7 +115,12 @@ class Server {
   /// Returns how many were merged.
   int process(double now, int max_submaps = -1);
 
-  std::size_t pending() const { return queue_.size(); }
+  /// Submaps accepted and not merged yet (any thread).
+  std::size_t pending() const;
+  /// Holds the intake state still for a reader on another thread than the
+  /// receiving one (briefly: onFrame() waits meanwhile). Never while calling
+  /// onFrame(), process() or checkpoint() on the same thread.
+  std::unique_lock<std::mutex> lockIntake() const { return std::unique_lock<std::mutex>(intake_mu_); }
   const Bookkeeper& bookkeeper() const { return bookkeeper_; }
   const CredibilityAssessor& credibility() const { return queue_; }
   const MapManager& mapManager() const { return map_; }
@@ -135,6 +156,17 @@ class Server {
                                                   const std::optional<Keyring>& keyring);
   ReceiveResult receiveJournaled(const std::uint8_t* data, std::size_t size,
                                  const SubmapHeader* claimed, double now);
+  /// Under the intake lock: false when the queue is empty; else true with the
+  /// next submap in credibility order taken out of it (empty if it was lost).
+  bool takeNext(double now, std::optional<ReceivedSubmap>* next);
+  /// The checkpoint body: the intake state copied under the intake lock (with
+  /// `covers`, the journal entries it covers are moved there at the same
+  /// moment), the map encoded outside it.
+  std::vector<std::uint8_t> encodeState(std::vector<SubmapHeader>* covers);
+  /// The intake state's parts of the body, before and after the map.
+  void saveIntake(ByteWriter* head, ByteWriter* tail) const;
+  /// head + the map (read by the merging thread, no lock) + tail.
+  std::vector<std::uint8_t> withMap(ByteWriter head, const ByteWriter& tail) const;
 
   ServerParams params_;
   std::optional<Keyring> keyring_;
@@ -155,6 +187,7 @@ class Server {
   double last_checkpoint_ = -1e300;
   DurabilityStats durability_;
   ResumeReport resume_;
+  mutable std::mutex intake_mu_;  ///< the intake state (top of this file)
 };
 
 }  // namespace server

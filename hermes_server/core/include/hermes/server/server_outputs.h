@@ -27,6 +27,28 @@ Trajectory agentTrajectory(const GlobalMap& map, std::uint32_t agent,
 /// after a merge (global_pose.h).
 std::vector<std::pair<std::uint32_t, GlobalPoseUpdate>> globalPoseUpdates(const GlobalMap& map);
 
+/// What the live outputs need from the merged map, copied after a merge so
+/// that another thread can publish them while the next merge runs
+/// (server_worker.h). Positions in the world frame.
+struct MergedView {
+  struct RobotPose {
+    RobotId robot = 0;
+    Uuid uuid{};
+    GlobalPoseUpdate update;
+  };
+  std::uint64_t version = 0;                 ///< views published before this one + 1
+  std::vector<RobotPose> poses;              ///< globalPoseUpdates of current sessions only
+  std::map<RobotId, Trajectory> paths;       ///< agentTrajectory of every robot that has one
+  std::vector<Vec3> landmarks;               ///< GlobalMap::landmarkPositionsWorld
+  std::vector<std::pair<Vec3, Vec3>> loops;  ///< accepted loops between anchored keyframes (camera centres)
+  RunMetrics metrics;                        ///< mergeMetrics (the intake part is added when read)
+};
+
+/// The view of the server's map now: call from the thread that runs
+/// process() (or while none runs); it takes Server::lockIntake() for the
+/// bookkeeper's part.
+MergedView mergedView(const Server& server);
+
 /// Writes <dir>/agent_<robot>.tum for every anchored agent; returns the paths.
 Expected<std::vector<std::string>> writeAgentTrajectories(
     const GlobalMap& map, const std::string& dir, const std::map<std::uint32_t, SE3>& T_B_C = {});
@@ -46,8 +68,14 @@ void fillHeldLoad(const Server& server, RobotId robot, AgentMetrics* metrics);
 
 /// The server's share of the metrics JSON: loops_accepted, loops_rejected,
 /// agents_merged, timings_ms, frames_refused; per_agent with keyframes/landmarks/
-/// bytes/submaps and the held load.
+/// bytes/submaps and the held load. Both parts below: read it from the thread
+/// that runs process(), or while none runs.
 RunMetrics serverMetrics(const Server& server);
+/// The merging thread's part: loops_accepted, loops_rejected, timings_ms.
+RunMetrics mergeMetrics(const Server& server);
+/// The intake part (with a merge thread running elsewhere: under
+/// Server::lockIntake()): agents_merged, per_agent, bytes_total, frames_refused.
+void addIntakeMetrics(const Server& server, RunMetrics* m);
 
 }  // namespace server
 }  // namespace hermes

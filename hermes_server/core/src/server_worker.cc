@@ -1,0 +1,149 @@
+#include "hermes/server/server_worker.h"
+
+namespace hermes {
+namespace server {
+
+Status ServerWorkerParams::validate() const {
+  if (latency_window < 1) return Error{"server worker: latency_window must be >= 1"};
+  return Status::Ok();
+}
+
+ServerWorker::ServerWorker(std::unique_ptr<Server> server, ServerWorkerParams params, Clock clock,
+                           Merged on_merged)
+    : server_(std::move(server)),
+      params_(params),
+      clock_(std::move(clock)),
+      on_merged_(std::move(on_merged)),
+      acks_(params.latency_window) {
+  HERMES_CHECK(server_ != nullptr, "server worker: no server");
+  HERMES_CHECK(static_cast<bool>(clock_), "server worker: no clock");
+  const Status valid = params_.validate();
+  HERMES_CHECK(static_cast<bool>(valid), valid.error());
+  auto first = std::make_shared<MergedView>(mergedView(*server_));  // a resumed server holds a map
+  first->version = 1;
+  view_ = std::move(first);
+  const ServerCounters& c = server_->counters();
+  attempts_seen_ = c.merged + c.merge_errors;
+  if (!params_.parallel) return;
+  work_ = server_->pending() > 0;  // resumed with submaps queued
+  running_ = true;
+  thread_ = std::thread([this] { loop(); });
+}
+
+ServerWorker::~ServerWorker() { stop(); }
+
+ReceiveResult ServerWorker::onFrame(const std::uint8_t* data, std::size_t size,
+                                    const SubmapHeader* claimed, double now) {
+  ReceiveResult r = server_->onFrame(data, size, claimed, now);
+  if (r.verdict == ArrivalVerdict::kAccept && params_.parallel) {
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      work_ = true;
+    }
+    wake_.notify_one();
+  }
+  return r;
+}
+
+void ServerWorker::recordAckLatency(double ms) {
+  std::lock_guard<std::mutex> l(mu_);
+  acks_.add("ack_latency", ms);
+}
+
+int ServerWorker::process(double now, int max_submaps) {
+  HERMES_CHECK(!running_, "server worker: process() while the merge thread runs");
+  const int merged = server_->process(now, max_submaps);
+  publish();
+  return merged;
+}
+
+void ServerWorker::loop() {
+  std::unique_lock<std::mutex> l(mu_);
+  while (true) {
+    wake_.wait(l, [this] { return stopping_ || work_; });
+    if (stopping_) break;
+    work_ = false;
+    merging_ = true;
+    l.unlock();
+    // One submap per call: a stop request is seen between merges, and every
+    // merge gets its own view.
+    while (!stopping_ && server_->pending() > 0) {
+      server_->process(clock_(), 1);
+      publish();
+    }
+    l.lock();
+    merging_ = false;
+    if (!work_) idle_.notify_all();
+  }
+  merging_ = false;
+  idle_.notify_all();
+}
+
+void ServerWorker::publish() {
+  const ServerCounters& c = server_->counters();
+  const std::size_t attempts = c.merged + c.merge_errors;
+  if (attempts == attempts_seen_) return;
+  attempts_seen_ = attempts;
+  auto v = std::make_shared<MergedView>(mergedView(*server_));
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    v->version = view_->version + 1;
+    view_ = v;
+  }
+  if (on_merged_) on_merged_(*v);
+}
+
+void ServerWorker::waitIdle() {
+  std::unique_lock<std::mutex> l(mu_);
+  idle_.wait(l, [this] { return !running_ || (!work_ && !merging_); });
+}
+
+void ServerWorker::requestStop() {
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    stopping_ = true;
+  }
+  wake_.notify_one();
+}
+
+void ServerWorker::stop() {
+  requestStop();
+  if (thread_.joinable()) thread_.join();
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    running_ = false;
+  }
+  idle_.notify_all();
+}
+
+std::shared_ptr<const MergedView> ServerWorker::view() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return view_;
+}
+
+RunMetrics ServerWorker::metrics() const {
+  RunMetrics m;
+  if (running_) {
+    m = view()->metrics;
+    const auto lock = server_->lockIntake();
+    addIntakeMetrics(*server_, &m);
+  } else {
+    m = serverMetrics(*server_);
+  }
+  std::lock_guard<std::mutex> l(mu_);
+  for (const auto& [name, t] : acks_.summary()) m.timings_ms[name] = t;
+  return m;
+}
+
+Server& ServerWorker::server() {
+  HERMES_CHECK(!running_, "server worker: the server is the merge thread's while it runs");
+  return *server_;
+}
+
+const Server& ServerWorker::server() const {
+  HERMES_CHECK(!running_, "server worker: the server is the merge thread's while it runs");
+  return *server_;
+}
+
+}  // namespace server
+}  // namespace hermes
