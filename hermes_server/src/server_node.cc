@@ -8,7 +8,7 @@
 //        it into TF world -> <robot>/odom and odom_global)
 //        /hermes/status (std_msgs/String, metrics JSON, 1 Hz)
 //        /hermes/path/<robot id> (nav_msgs/Path of merged keyframes, frame "world")
-//        /hermes/global_map (sensor_msgs/PointCloud2, frame "world", latched)
+//        /hermes/global_map (sensor_msgs/PointCloud2 xyz + rgb, each point in its robot's colour, frame "world", latched)
 //        /hermes/loops (visualization_msgs/Marker LINE_LIST of accepted loops)
 //        TF world -> hermes_origin (1 Hz), so the fixed frame exists; the robots'
 //        own nodelets publish world -> <robot>/odom from /hermes/global_pose
@@ -54,6 +54,7 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/Marker.h>
 
+#include <array>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -109,18 +110,28 @@ geometry_msgs::Pose toPose(const hermes::SE3& T) {
   return p;
 }
 
-sensor_msgs::PointCloud2 toCloud(const std::vector<hermes::Vec3>& points, const std_msgs::Header& h) {
+/// The global map as xyz + rgb points, each in its robot's colour (robotColour,
+/// as the paths in config/rviz/hermes.rviz); grey when the robot is not known.
+sensor_msgs::PointCloud2 toCloud(const std::vector<hermes::Vec3>& points,
+                                 const std::vector<hermes::RobotId>& robots, const std_msgs::Header& h) {
   sensor_msgs::PointCloud2 cloud;
   cloud.header = h;
   sensor_msgs::PointCloud2Modifier mod(cloud);
-  mod.setPointCloud2FieldsByString(1, "xyz");
+  mod.setPointCloud2FieldsByString(2, "xyz", "rgb");
   mod.resize(points.size());
   sensor_msgs::PointCloud2Iterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
-  for (const hermes::Vec3& p : points) {
+  sensor_msgs::PointCloud2Iterator<std::uint8_t> r(cloud, "r"), g(cloud, "g"), b(cloud, "b");
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const hermes::Vec3& p = points[i];
     *x = float(p.x());
     *y = float(p.y());
     *z = float(p.z());
-    ++x, ++y, ++z;
+    const std::array<std::uint8_t, 3> c =
+        i < robots.size() ? hermes::server::robotColour(robots[i]) : std::array<std::uint8_t, 3>{160, 160, 160};
+    *r = c[0];
+    *g = c[1];
+    *b = c[2];
+    ++x, ++y, ++z, ++r, ++g, ++b;
   }
   return cloud;
 }
@@ -287,14 +298,17 @@ class ServerNode {
                  .first;
       it->second.publish(path);
     }
-    map_pub_.publish(toCloud(view->landmarks, h));
+    map_pub_.publish(toCloud(view->landmarks, view->landmark_robots, h));
+    // Loops: hairlines, translucent, so hundreds of them do not bury the map.
     visualization_msgs::Marker loops;
     loops.header = h;
     loops.ns = "loops";
     loops.type = visualization_msgs::Marker::LINE_LIST;
-    loops.scale.x = 0.02;
+    loops.scale.x = 0.004;
     loops.color.r = 1.0;
-    loops.color.a = 1.0;
+    loops.color.g = 0.85;
+    loops.color.b = 0.3;
+    loops.color.a = 0.35;
     loops.pose.orientation.w = 1.0;
     for (const auto& [a, b] : view->loops) {
       loops.points.push_back(toPoint(a));

@@ -45,7 +45,7 @@ std::vector<std::pair<std::uint32_t, GlobalPoseUpdate>> globalPoseUpdates(const 
 MergedView mergedView(const Server& server) {
   MergedView v;
   const GlobalMap& map = server.map();
-  v.landmarks = map.landmarkPositionsWorld();
+  v.landmarks = map.landmarkPositionsWorld(&v.landmark_robots);
   for (const LoopEdge& l : map.loops) {
     const StoredKeyframe* a = map.keyframe(l.a);
     const StoredKeyframe* b = map.keyframe(l.b);

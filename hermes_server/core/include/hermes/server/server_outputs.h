@@ -40,6 +40,7 @@ struct MergedView {
   std::vector<RobotPose> poses;              ///< globalPoseUpdates of current sessions only
   std::map<RobotId, Trajectory> paths;       ///< agentTrajectory of every robot that has one
   std::vector<Vec3> landmarks;               ///< GlobalMap::landmarkPositionsWorld
+  std::vector<RobotId> landmark_robots;      ///< the robot of each landmark (same order)
   std::vector<std::pair<Vec3, Vec3>> loops;  ///< accepted loops between anchored keyframes (camera centres)
   RunMetrics metrics;                        ///< mergeMetrics (the intake part is added when read)
 };
