@@ -82,6 +82,9 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     troubled.max_keyframes = params_.trouble_max_keyframes;
     link.bandwidth_Bps *= params_.trouble_budget_gain;  // the backlog still counts in full
   }
+  // Not in the global map yet: more keyframes (places for a loop), same budget.
+  rep.unplaced = params_.strategy != "none" && params_.unplaced_aware && !input.placed;
+  if (rep.unplaced) troubled.max_keyframes = params_.trouble_max_keyframes;
   const DistillParams& prm = troubled;
   rep.budget_bytes = prm.coordinator ? budgetBytes(prm, link)
                                      : std::numeric_limits<double>::infinity();

@@ -72,6 +72,7 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("trim_min_shared", trim_min_shared)
   HERMES_READ("trim_time_limit_s", trim_time_limit_s)
   HERMES_READ_BOOL("trouble_aware", trouble_aware)
+  HERMES_READ_BOOL("unplaced_aware", unplaced_aware)
   HERMES_READ("trouble_weak_frames", trouble_weak_frames)
   HERMES_READ("trouble_max_keyframes", trouble_max_keyframes)
   HERMES_READ("trouble_budget_gain", trouble_budget_gain)
@@ -154,6 +155,7 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "milp_rel_gap", milp_rel_gap);
   out->set(p + "milp_warm_start", milp_warm_start);
   out->set(p + "trouble_aware", std::string(trouble_aware ? "on" : "off"));
+  out->set(p + "unplaced_aware", std::string(unplaced_aware ? "on" : "off"));
   out->set(p + "trouble_weak_frames", trouble_weak_frames);
   out->set(p + "trouble_max_keyframes", trouble_max_keyframes);
   out->set(p + "trouble_budget_gain", trouble_budget_gain);

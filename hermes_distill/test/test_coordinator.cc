@@ -223,6 +223,41 @@ TEST(Coordinator, ProbingSendsMore) {
   EXPECT_LE(static_cast<double>(probe.report.bytes_actual), probe.report.budget_bytes);
 }
 
+// A robot the server has not placed in the global map yet keeps more keyframes
+// per window (places where a loop can tie it in), within the same budget: with
+// 12 a window, two groups of a 10-robot swarm never closed a loop between them.
+TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
+  SyntheticWindowParams wp;
+  wp.keyframe_period_s = 0.2;  // 25 keyframes in 5 s
+  wp.seed = 5;
+  auto scene = makeSceneFromTum(testing::groundTruthPath("MH_04_difficult"), wp);
+  ASSERT_TRUE(scene.ok()) << scene.error();
+  const Expected<SyntheticWindow> w = scene->window(20.0, 1);
+  ASSERT_TRUE(w.ok()) << w.error();
+  ASSERT_GE(w->submap.keyframes.size(), 20u);
+  DistillParams p;
+  auto run = [&](const DistillParams& params, bool placed) {
+    CoordinatorInput in;
+    in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
+    in.placed = placed;
+    return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
+  };
+  const DistillReport placed = run(p, true);
+  const DistillReport unplaced = run(p, false);
+  ASSERT_FALSE(placed.deferred) << placed.defer_reason;
+  ASSERT_FALSE(unplaced.deferred) << unplaced.defer_reason;
+  EXPECT_FALSE(placed.unplaced);
+  EXPECT_TRUE(unplaced.unplaced);
+  EXPECT_LE(placed.n_kf, p.max_keyframes);
+  EXPECT_GT(unplaced.n_kf, p.max_keyframes);
+  EXPECT_LE(unplaced.n_kf, p.trouble_max_keyframes);
+  EXPECT_DOUBLE_EQ(unplaced.budget_bytes, placed.budget_bytes);
+  EXPECT_LE(static_cast<double>(unplaced.bytes_actual), unplaced.budget_bytes);
+  DistillParams off = p;
+  off.unplaced_aware = false;
+  EXPECT_LE(run(off, false).n_kf, p.max_keyframes);
+}
+
 TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
   SyntheticWindowParams wp;
   wp.keyframe_period_s = 0.2;  // 25 keyframes in 5 s: fast motion

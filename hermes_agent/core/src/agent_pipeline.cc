@@ -211,6 +211,7 @@ void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   sink.link_now = now;
   sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
   sink.loop_closures = loop_closures_;
+  sink.placed = globalPose().latest().has_value();
   sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
     return submitWindow(submap, std::move(bytes), now);
   };
@@ -337,6 +338,7 @@ void AgentPipeline::runWindowJob(WindowJob& job) {
   }
   sink.link_now = now;
   sink.loop_closures = loop_closures_.load();
+  sink.placed = globalPose().latest().has_value();
   sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
     std::lock_guard<std::mutex> lock(uplink_mu_);
     return submitWindow(submap, std::move(bytes), now);

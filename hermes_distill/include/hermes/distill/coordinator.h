@@ -40,6 +40,10 @@ struct CoordinatorInput {
   /// window carrying deferred ones stands for all their periods: the link had
   /// that long for it (else the floor, which grows with the span, never fits).
   double period_s = 0;
+  /// The server has placed this robot in the global map (a global pose came
+  /// back). While it has not, its windows keep up to trouble_max_keyframes
+  /// keyframes (distill.unplaced_aware): more places where a loop can tie it in.
+  bool placed = true;
 };
 
 /// Eq. 17 budget η B̂ Δt − backlog (may be negative when the backlog exceeds what the link carries).

@@ -58,6 +58,7 @@ struct DistillReport {
   std::size_t bytes_actual = 0;  ///< encoder's size (0 without a size function)
   bool over_budget = false;
   bool trouble = false;        ///< the window was in trouble (inTrouble): more keyframes and budget
+  bool unplaced = false;       ///< the robot was not in the global map yet: more keyframes
   int rounds = 0;
   double objective = 0, greedy_objective = 0, support_slack = 0, grid_slack = 0;
   double alpha = 0, beta = 0;

@@ -78,6 +78,7 @@ struct WindowSink {
   double link_now = 0;        ///< [s] uplink clock for the monitor
   double backlog_bytes = 0;   ///< unacknowledged bytes in the uplink
   int loop_closures = 0;      ///< loops the server reported (alpha rule)
+  bool placed = true;         ///< the server placed the robot in the global map (CoordinatorInput::placed)
   /// Takes the encoded frame; an error counts the window as refused.
   std::function<Status(const Submap& submap, std::vector<std::uint8_t>&& frame)> submit;
 };
@@ -93,6 +94,7 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
   in.bandwidth_Bps = monitor.planningRate(sink ? sink->link_now : stamp);
   in.backlog_bytes = sink ? sink->backlog_bytes : 0;
   in.loop_closures = sink ? sink->loop_closures : 0;
+  in.placed = sink ? sink->placed : true;
   in.link_keeps_up = sink && monitor.samples() > 0 && sink->backlog_bytes <= 0 && periods == 1;
   in.link_unmeasured = sink && monitor.samples() == 0;
   in.period_s = periods * distiller.params().window_s;
