@@ -37,10 +37,13 @@ Expected<std::vector<Vec3>> readPly(const std::string& path);
 /// What the server holds for `robot` awaiting merge, into the agent's metrics
 /// (held_submaps, held_bytes, held_bytes_peak; zeros when nothing ever was).
 void fillHeldLoad(const Server& server, RobotId robot, AgentMetrics* metrics);
+/// The robot's sessions, of them re-localised and reported as new robots
+/// (bookkeeper.h), into the agent's metrics (sessions, relocalised, reported_new).
+void fillSessions(const Bookkeeper& bookkeeper, RobotId robot, AgentMetrics* metrics);
 
 /// The server's share of the metrics JSON: loops_accepted, loops_rejected,
-/// agents_merged, timings_ms, frames_refused; per_agent with keyframes/landmarks/
-/// bytes/submaps and the held load.
+/// agents_merged, timings_ms, frames_refused, relocalised, robots_new; per_agent
+/// with keyframes/landmarks/bytes/submaps, the held load and the sessions.
 RunMetrics serverMetrics(const Server& server);
 
 }  // namespace server
