@@ -263,13 +263,16 @@ std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotI
     }
   }
   world_ = best;
+  // The robot's first session defines the world: the map its loops tie to the
+  // others; a later session (restart, map reset) re-localises against it.
   AgentStats& w = agents_[best];
-  w.anchored = true;
-  w.T_W_A = SE3::identity();
-  auto ws = w.sessions.find(w.current_session);
-  if (ws != w.sessions.end()) {
-    ws->second.anchored_by = SessionAnchor::kWorld;
-    ws->second.anchored_at = now;
+  if (!w.sessions.empty()) {
+    w.sessions.begin()->second.anchored_by = SessionAnchor::kWorld;
+    w.sessions.begin()->second.anchored_at = now;
+  }
+  if (w.sessions.empty() || w.sessions.begin()->first == w.current_session) {
+    w.anchored = true;
+    w.T_W_A = SE3::identity();
   }
   return world_;
 }
@@ -340,6 +343,14 @@ double Bookkeeper::clock() const {
   double now = -1;
   for (const AgentStats& a : agents_) now = std::max(now, a.last_time);
   return now;
+}
+
+std::optional<std::uint32_t> Bookkeeper::worldSession() const {
+  if (!world_) return std::nullopt;
+  const AgentStats& w = agents_[*world_];
+  for (const auto& [id, s] : w.sessions)
+    if (s.anchored_by == SessionAnchor::kWorld) return id;
+  return w.current_session;  // no submap accepted (anchor_min_keyframes 0)
 }
 
 bool Bookkeeper::anchored(RobotId robot) const {

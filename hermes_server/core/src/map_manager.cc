@@ -416,8 +416,7 @@ bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibili
   // restarted or reset its map) is anchored by loops like any other trajectory,
   // never put at the origin.
   if (!world_traj_) {
-    const AgentStats* ws = bookkeeper_->stats(*world);
-    auto wt = map_.trajectories.find({*world, ws ? ws->current_session : 0});
+    auto wt = map_.trajectories.find({*world, bookkeeper_->worldSession().value_or(0)});
     if (wt != map_.trajectories.end() && !wt->second.anchored) {
       anchorTrajectory(&wt->second, SE3::identity(), SessionAnchor::kWorld);
       world_traj_ = wt->first;

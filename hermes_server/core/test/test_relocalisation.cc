@@ -109,6 +109,18 @@ TEST(Relocalisation, TheWorldRobotsNewSessionIsNotPutAtTheOrigin) {
   EXPECT_FALSE(f.bk.markSessionAnchored(0, 7, SessionAnchor::kLoop, T_W_A0b));  // no such session
 }
 
+TEST(Relocalisation, ARobotResetBeforeTheWorldIsFixedDefinesItWithItsFirstSession) {
+  Bookkeeper bk;
+  const Uuid a = uuidFromSeed(43);
+  bk.onArrival(arrival(a, 0, 0), 1.0);
+  bk.onArrival(arrival(a, 1, 0), 5.0);  // reset before the world was fixed
+  ASSERT_EQ(bk.selectWorld(nullptr), std::optional<RobotId>(0));
+  EXPECT_EQ(bk.worldSession(), std::optional<std::uint32_t>(0));
+  EXPECT_EQ(bk.stats(0)->sessions.at(0).anchored_by, SessionAnchor::kWorld);
+  EXPECT_EQ(bk.stats(0)->sessions.at(1).anchored_by, SessionAnchor::kNone);
+  EXPECT_FALSE(bk.anchored(0));  // its current session still needs loops
+}
+
 TEST(Relocalisation, NoLoopWithinTheTimeoutReportsANewRobotUnderTheSameId) {
   BookkeeperParams p;
   p.relocalisation_timeout_s = 30;

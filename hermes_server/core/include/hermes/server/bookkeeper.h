@@ -35,7 +35,8 @@
 //   rejected    unknown agent while registration is required, or a malformed
 //               header (e.g. nil uuid): do not acknowledge
 //
-// Global frame: selectWorld() makes the most credible agent's frame the world frame
+// Global frame: selectWorld() makes the most credible agent's frame (of its first
+// session) the world frame
 // (T_W_A = identity, anchored) among the agents that have accepted >=
 // anchor_min_keyframes keyframes ("qualified"), once (a) every known agent is
 // qualified, or (b) a verified loop ties a qualified agent to another agent (a map
@@ -196,6 +197,8 @@ class Bookkeeper {
   /// clock). Returns the (robot, session) pairs reported by this call.
   std::vector<std::pair<RobotId, std::uint32_t>> checkRelocalisation(double now);
   std::optional<RobotId> worldAgent() const { return world_; }
+  /// The world agent's session that defines the world frame (its first).
+  std::optional<std::uint32_t> worldSession() const;
   bool anchored(RobotId robot) const;
   std::optional<SE3> T_W_A(RobotId robot) const;
 
