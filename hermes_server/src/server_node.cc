@@ -26,7 +26,9 @@
 // ~transport (ros | mqtt; default: the config's `transport`), ~mqtt_host,
 // ~mqtt_port (override mqtt.host / mqtt.port): with mqtt the submaps and
 // heartbeats come from hermes/+/submap and hermes/+/heartbeat through the broker
-// and every ack goes to hermes/<robot>/ack (hermes_transport/mqtt_links.h),
+// and every ack goes to hermes/<robot>/ack, every global pose (as on
+// /hermes/global_pose) also to hermes/<robot>/global_pose once a heartbeat named
+// the robot (hermes_transport/mqtt_links.h),
 // handled by a 20 ms wall timer on the spinner thread; /hermes/submap,
 // /hermes/heartbeat and /hermes/submap_ack are then not used. An unreachable
 // broker is reported and tried again with backoff.
@@ -220,7 +222,17 @@ class ServerNode {
       m.world_from_odom.translation.z = p.position.z;
       m.world_from_odom.rotation = p.orientation;
       global_pub_.publish(m);
+      if (mqtt_) sendGlobalPoseMqtt(m.agent_uuid, hermes::transport::GlobalPoseMessage{st->uuid, u});
     }
+  }
+
+  /// MQTT: to hermes/<robot>/global_pose once the robot's name is known (heartbeats).
+  void sendGlobalPoseMqtt(const std::string& uuid, const hermes::transport::GlobalPoseMessage& msg) {
+    auto name = names_.find(uuid);
+    if (name == names_.end()) return;
+    if (hermes::Status s = mqtt_->sendGlobalPose(name->second, msg); !s)
+      ROS_WARN_THROTTLE(5.0, "hermes_server: global pose of '%s' over MQTT: %s", name->second.c_str(),
+                        s.error().c_str());
   }
 
   /// The fixed frame exists before any robot publishes its world -> odom.

@@ -47,6 +47,17 @@ void expectOneIdPerRobot(const system::OfflineRun& run, const RunMetrics& m) {
   EXPECT_EQ(run.server().counters().merge_errors, 0u) << run.server().counters().last_error;
 }
 
+/// The reset robot's metrics (two sessions) and the run's totals (only it reset).
+void expectSessionCounts(const RunMetrics& metrics, const std::string& name, int relocalised, int reported_new) {
+  const AgentMetrics* m = metricsOf(metrics, name);
+  ASSERT_TRUE(m) << name;
+  EXPECT_EQ(m->sessions.value_or(0), 2);
+  EXPECT_EQ(m->relocalised.value_or(-1), relocalised);
+  EXPECT_EQ(m->reported_new.value_or(-1), reported_new);
+  EXPECT_EQ(metrics.relocalised.value_or(-1), relocalised);
+  EXPECT_EQ(metrics.robots_new.value_or(-1), reported_new);
+}
+
 /// Runs to the end, evaluates, prints the report, checks one id per robot.
 system::RunResults runAndCheck(system::OfflineRun& run) {
   EXPECT_TRUE(run.run());
@@ -95,13 +106,9 @@ TEST(RelocalisationRun, RobotResetMidRunIsReLocalisedUnderItsId) {
   ASSERT_TRUE(t && t->anchored);
   EXPECT_GT(t->T_W_A.translation().norm(), 0.3) << "the new session sits at the world origin";
 
+  expectSessionCounts(r.metrics, victim, /*relocalised=*/1, /*reported_new=*/0);
   const AgentMetrics* m = metricsOf(r.metrics, victim);
   ASSERT_TRUE(m);
-  EXPECT_EQ(m->sessions.value_or(0), 2);
-  EXPECT_EQ(m->relocalised.value_or(0), 1);
-  EXPECT_EQ(m->reported_new.value_or(-1), 0);
-  EXPECT_EQ(r.metrics.relocalised.value_or(0), 1);
-  EXPECT_EQ(r.metrics.robots_new.value_or(-1), 0);
   EXPECT_EQ(r.metrics.agents_merged.value_or(0), 2);
   // Both sessions' merged poses, against the one ground truth of the robot.
   ASSERT_TRUE(m->merged_ate_rmse_m && r.metrics.ate_rmse_m);
@@ -145,13 +152,7 @@ TEST(RelocalisationRun, RobotResetThatNeverRevisitsIsReportedNewAfterTheTimeout)
   EXPECT_EQ(fresh.anchored_by, SessionAnchor::kNone);
   EXPECT_TRUE(fresh.reported_new);
   EXPECT_FALSE(run->server().bookkeeper().anchored(*a->robot));
-  const AgentMetrics* m = metricsOf(r.metrics, victim);
-  ASSERT_TRUE(m);
-  EXPECT_EQ(m->sessions.value_or(0), 2);
-  EXPECT_EQ(m->reported_new.value_or(0), 1);
-  EXPECT_EQ(m->relocalised.value_or(-1), 0);
-  EXPECT_EQ(r.metrics.robots_new.value_or(0), 1);
-  EXPECT_EQ(r.metrics.relocalised.value_or(-1), 0);
+  expectSessionCounts(r.metrics, victim, /*relocalised=*/0, /*reported_new=*/1);
   // The other robots merged as usual.
   EXPECT_GE(r.metrics.agents_merged.value_or(0), 2);
   const nlohmann::json j = system::resultsJson(r);

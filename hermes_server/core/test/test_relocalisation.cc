@@ -24,12 +24,18 @@ SubmapArrival arrival(const Uuid& agent, std::uint32_t session, std::uint64_t se
   return a;
 }
 
+BookkeeperParams params(double relocalisation_timeout_s) {
+  BookkeeperParams p;
+  p.relocalisation_timeout_s = relocalisation_timeout_s;
+  return p;
+}
+
 /// Robots 0 (the world) and 1 (anchored by loops at T_W_A1), session 1 each, at t 0..2 s.
 struct TwoRobots {
   const Uuid a = uuidFromSeed(41), b = uuidFromSeed(42);
   const SE3 T_W_A1{expSO3(Vec3(0, 0, 0.4)), Vec3(3, -1, 0.5)};
   Bookkeeper bk;
-  explicit TwoRobots(BookkeeperParams p = {}) : bk(p) {
+  explicit TwoRobots(double relocalisation_timeout_s = 60) : bk(params(relocalisation_timeout_s)) {
     for (std::uint64_t seq = 0; seq < 2; ++seq) {
       EXPECT_EQ(bk.onArrival(arrival(a, 1, seq), double(seq)).verdict, ArrivalVerdict::kAccept);
       EXPECT_EQ(bk.onArrival(arrival(b, 1, seq), double(seq) + 0.5).verdict, ArrivalVerdict::kAccept);
@@ -122,9 +128,7 @@ TEST(Relocalisation, ARobotResetBeforeTheWorldIsFixedDefinesItWithItsFirstSessio
 }
 
 TEST(Relocalisation, NoLoopWithinTheTimeoutReportsANewRobotUnderTheSameId) {
-  BookkeeperParams p;
-  p.relocalisation_timeout_s = 30;
-  TwoRobots f(p);
+  TwoRobots f(30);
   f.bk.onArrival(arrival(f.b, 2, 0), 10.0);
   f.bk.onArrival(arrival(f.b, 2, 1), 20.0);
   EXPECT_TRUE(f.bk.checkRelocalisation(39.9).empty());
@@ -144,16 +148,14 @@ TEST(Relocalisation, NoLoopWithinTheTimeoutReportsANewRobotUnderTheSameId) {
 }
 
 TEST(Relocalisation, StateSurvivesACheckpoint) {
-  BookkeeperParams p;
-  p.relocalisation_timeout_s = 5;
-  TwoRobots f(p);
+  TwoRobots f(5);
   f.bk.onArrival(arrival(f.b, 2, 0), 10.0);
   f.bk.onArrival(arrival(f.a, 2, 0), 11.0);
   ASSERT_TRUE(f.bk.markSessionAnchored(1, 2, SessionAnchor::kLoop, f.T_W_A1));
   ASSERT_EQ(f.bk.checkRelocalisation(20.0).size(), 1u);  // robot 0's session 2
   server::ByteWriter w;
   f.bk.save(&w);
-  Bookkeeper restored(p);
+  Bookkeeper restored(params(5));
   server::ByteReader r(w.out.data(), w.out.size());
   ASSERT_TRUE(restored.load(&r));
   for (RobotId robot : {0u, 1u}) {
