@@ -44,7 +44,7 @@
 // wall time. Images are paired under one mutex, the pipeline's calls are made
 // under another (its uplink thread calls the transport, which only publishes).
 // Transport (~transport, default: the config's `transport`): ros = the /hermes/*
-// topics above; mqtt = hermes/<robot>/submap, /ack, /heartbeat through the broker
+// topics above; mqtt = hermes/<robot>/submap, /ack, /heartbeat, /global_pose through the broker
 // of the config's mqtt.* (~mqtt_host, ~mqtt_port override host and port;
 // hermes_transport/mqtt_links.h): the link's events are handled by a 20 ms wall
 // timer under the pipeline mutex, after the pipeline exists (acks kept by the
@@ -293,6 +293,7 @@ class AgentNodelet : public nodelet::Nodelet {
     for (const hermes::transport::AckMessage& a : ev.acks)
       handleAck(!a.acknowledges(), a.reason_code == hermes_msgs::SubmapAck::REASON_QUOTA, a.session, a.seq,
                 a.reason);
+    for (const hermes::GlobalPoseUpdate& u : ev.global_poses) takeGlobalPose(u, "mqtt global_pose");
   }
 
   /// The core's pairing and conversion for `calib` (call with stream_mu_ held or
@@ -502,8 +503,13 @@ class AgentNodelet : public nodelet::Nodelet {
     const auto& tr = m->world_from_odom;
     u.T_W_O = hermes::SE3(hermes::Quat(tr.rotation.w, tr.rotation.x, tr.rotation.y, tr.rotation.z),
                           hermes::Vec3(tr.translation.x, tr.translation.y, tr.translation.z));
+    takeGlobalPose(u, "/hermes/global_pose");
+  }
+
+  /// This robot's world <- odom (ROS or MQTT; call with mu_ held and the pipeline made).
+  void takeGlobalPose(const hermes::GlobalPoseUpdate& u, const char* source) {
     if (hermes::Status s = u.validate(); !s) {
-      NODELET_WARN_THROTTLE(5.0, "Agent %s: /hermes/global_pose: %s", robot_.c_str(), s.error().c_str());
+      NODELET_WARN_THROTTLE(5.0, "Agent %s: %s: %s", robot_.c_str(), source, s.error().c_str());
       return;
     }
     if (pipeline_->onGlobalPose(u, ros::WallTime::now().toSec()) && !placed_) {

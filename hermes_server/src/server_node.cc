@@ -38,8 +38,10 @@
 // ~transport (ros | mqtt; default: the config's `transport`), ~mqtt_host,
 // ~mqtt_port (override mqtt.host / mqtt.port): with mqtt the submaps and
 // heartbeats come from hermes/+/submap and hermes/+/heartbeat through the broker
-// and every ack goes to hermes/<robot>/ack (hermes_transport/mqtt_links.h),
-// polled by a 20 ms wall timer on the spinner thread; /hermes/submap,
+// and every ack goes to hermes/<robot>/ack, every global pose (as on
+// /hermes/global_pose) also to hermes/<robot>/global_pose once a heartbeat named
+// the robot (hermes_transport/mqtt_links.h), polled by a 20 ms wall timer on the
+// spinner thread; /hermes/submap,
 // /hermes/heartbeat and /hermes/submap_ack are then not used. An unreachable
 // broker is reported and tried again with backoff.
 #include <hermes_msgs/AgentHeartbeat.h>
@@ -151,7 +153,7 @@ class ServerNode {
     worker_ = std::make_unique<ServerWorker>(
         std::move(server), wp, [] { return ros::WallTime::now().toSec(); },
         [this](const MergedView& v) {
-          if (ros::ok()) publishGlobalPoses(v);  // not once ROS shuts down (finish() stops the thread)
+          if (ros::ok()) publishGlobalPoses(v, false);  // not once ROS shuts down (finish() stops the thread)
         });
     if (mqtt_) {
       mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), [this](const ros::WallTimerEvent&) { onMqtt(); });
@@ -237,8 +239,9 @@ class ServerNode {
   }
 
   /// After a merge (on the merge thread) and once a second: every anchored
-  /// robot's current session hears its world <- odom.
-  void publishGlobalPoses(const MergedView& view) {
+  /// robot's current session hears its world <- odom. Over MQTT too with `mqtt`
+  /// (only from the spinner thread, which owns the MQTT link and the names).
+  void publishGlobalPoses(const MergedView& view, bool mqtt) {
     const ros::Time now = ros::Time::now();
     for (const MergedView::RobotPose& rp : view.poses) {
       const hermes::GlobalPoseUpdate& u = rp.update;
@@ -256,7 +259,17 @@ class ServerNode {
       m.world_from_odom.translation.z = p.position.z;
       m.world_from_odom.rotation = p.orientation;
       global_pub_.publish(m);
+      if (mqtt && mqtt_) sendGlobalPoseMqtt(m.agent_uuid, hermes::transport::GlobalPoseMessage{rp.uuid, u});
     }
+  }
+
+  /// MQTT: to hermes/<robot>/global_pose once the robot's name is known (heartbeats).
+  void sendGlobalPoseMqtt(const std::string& uuid, const hermes::transport::GlobalPoseMessage& msg) {
+    auto name = names_.find(uuid);
+    if (name == names_.end()) return;
+    if (hermes::Status s = mqtt_->sendGlobalPose(name->second, msg); !s)
+      ROS_WARN_THROTTLE(5.0, "hermes_server: global pose of '%s' over MQTT: %s", name->second.c_str(),
+                        s.error().c_str());
   }
 
   /// The fixed frame exists before any robot publishes its world -> odom.
@@ -270,7 +283,7 @@ class ServerNode {
 
   void publishOutputs() {
     const std::shared_ptr<const MergedView> view = worker_->view();
-    publishGlobalPoses(*view);  // also once a second: a robot that (re)connects hears it
+    publishGlobalPoses(*view, true);  // also once a second: a robot that (re)connects hears it
     std_msgs::String status;
     status.data = hermes::metricsToJsonString(worker_->metrics(), -1);
     status_pub_.publish(status);

@@ -25,6 +25,7 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
   if (!trace.ok()) return Error{trace.error()};
   std::unique_ptr<OfflineRun> run(new OfflineRun(params, nullptr));
   run->base_dir_ = base_dir;
+  run->spool_root_ = spool_root;
   if (!params.clock.server_restart_at.empty() && !run->params_.server.checkpoint.enabled())
     run->params_.server.checkpoint.dir =
         (fs::path(spool_root).parent_path() / "server_checkpoint").string();
@@ -58,39 +59,13 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     auto first = loadCameraFrame(*src.dataset, 0);
     if (!first.ok()) return Error{"agent " + src.name + ": frame 0: " + first.error()};
     a.clock_offset = first->stamp;
-    agent::AgentPipelineParams ap = params.run.agent;
-    ap.uplink.buffer.dir = (fs::path(spool_root) / src.name).string();
-    std::error_code ec;
-    fs::remove_all(ap.uplink.buffer.dir, ec);  // a run starts with an empty spool
-    auto pipeline = agent::AgentPipeline::create(
-        ap, src.name, agent::AgentCamera{info.K, info.baseline, info.T_B_C});
-    if (!pipeline.ok()) return Error{pipeline.error()};
-    if (params.corrupt.active() && params.corrupt.agent == src.name)
-      (*pipeline)->setOdometryCorruption(params.corrupt);
-    OfflineRun* self = run.get();
-    Status s = (*pipeline)->attachUplink(
-        [self, i](std::uint32_t session, std::uint64_t seq, const std::vector<std::uint8_t>& frame) {
-          OfflineAgent& sender = self->agents_[i];
-          if (!sender.sent.insert({session, seq}).second) ++sender.resent;
-          if (self->network_) {
-            self->network_->send(i, session, seq, frame, self->now_);
-            return;
-          }
-          LinkMessage m;
-          m.sender = static_cast<int>(i);
-          m.id = self->next_message_++;
-          m.bytes = frame.size();
-          m.payload = std::make_shared<const std::vector<std::uint8_t>>(frame);
-          m.send_time = self->now_;
-          self->messages_[m.id] = MessageKey{i, session, seq};
-          self->link_->send(std::move(m), self->now_);
-        },
-        a.clock_offset);
-    if (!s) return Error{s.error()};
     a.dataset = std::move(src.dataset);
-    a.pipeline = std::move(*pipeline);
     run->agents_.push_back(std::move(a));
+    auto pipeline = run->makePipeline(i, /*fresh=*/true);
+    if (!pipeline) return Error{pipeline.error()};
+    run->agents_[i].pipeline = std::move(*pipeline);
   }
+  if (Status s = run->checkResets(); !s) return Error{s.error()};
   if (params.corrupt.active() &&
       std::none_of(run->agents_.begin(), run->agents_.end(),
                    [&](const OfflineAgent& a) { return a.name == params.corrupt.agent; }))
@@ -98,6 +73,83 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
   if (!params.link.scenario.empty())
     if (Status s = run->createNetwork(spool_root); !s) return Error{s.error()};
   return run;
+}
+
+Expected<std::unique_ptr<agent::AgentPipeline>> OfflineRun::makePipeline(std::size_t i, bool fresh) {
+  const OfflineAgent& a = agents_[i];
+  const DatasetInfo& info = a.dataset->info();
+  agent::AgentPipelineParams ap = params_.run.agent;
+  ap.uplink.buffer.dir = (fs::path(spool_root_) / a.name).string();
+  if (fresh) {
+    std::error_code ec;
+    fs::remove_all(ap.uplink.buffer.dir, ec);  // a run starts with an empty spool
+  }
+  auto pipeline = agent::AgentPipeline::create(ap, a.name, agent::AgentCamera{info.K, info.baseline, info.T_B_C});
+  if (!pipeline.ok()) return Error{pipeline.error()};
+  if (params_.corrupt.active() && params_.corrupt.agent == a.name)
+    (*pipeline)->setOdometryCorruption(params_.corrupt);
+  Status s = (*pipeline)->attachUplink(
+      [this, i](std::uint32_t session, std::uint64_t seq, const std::vector<std::uint8_t>& frame) {
+        OfflineAgent& sender = agents_[i];
+        if (!sender.sent.insert({session, seq}).second) ++sender.resent;
+        if (network_) {
+          network_->send(i, session, seq, frame, now_);
+          return;
+        }
+        LinkMessage m;
+        m.sender = static_cast<int>(i);
+        m.id = next_message_++;
+        m.bytes = frame.size();
+        m.payload = std::make_shared<const std::vector<std::uint8_t>>(frame);
+        m.send_time = now_;
+        messages_[m.id] = MessageKey{i, session, seq};
+        link_->send(std::move(m), now_);
+      },
+      a.clock_offset);
+  if (!s) return Error{s.error()};
+  return std::move(*pipeline);
+}
+
+Status OfflineRun::checkResets() {
+  resets_ = params_.clock.agent_reset;
+  std::stable_sort(resets_.begin(), resets_.end(),
+                   [](const AgentReset& a, const AgentReset& b) { return a.at_s < b.at_s; });
+  for (const AgentReset& r : resets_) {
+    auto it = std::find_if(agents_.begin(), agents_.end(),
+                           [&](const OfflineAgent& a) { return a.name == r.agent; });
+    const std::string what = "system.agent_reset '" + formatAgentResets({r}) + "'";
+    if (it == agents_.end()) return Error{what + " names no agent of this run"};
+    const double last = it->dataset->frameTime(it->frames - 1) - it->clock_offset;
+    if (r.at_s > last)
+      return Error{what + ": after the agent's last frame (" + std::to_string(last) + " s)"};
+  }
+  return Status::Ok();
+}
+
+Status OfflineRun::resetAgents(double t) {
+  for (; next_reset_ < resets_.size() && t + 1e-9 >= resets_[next_reset_].at_s; ++next_reset_) {
+    const AgentReset& reset = resets_[next_reset_];
+    const std::size_t i = static_cast<std::size_t>(
+        std::find_if(agents_.begin(), agents_.end(),
+                     [&](const OfflineAgent& a) { return a.name == reset.agent; }) -
+        agents_.begin());
+    OfflineAgent& a = agents_[i];
+    AgentResetRecord r;
+    r.at_s = t;
+    r.frame = a.next;
+    r.old_session = a.pipeline->session();
+    r.bytes_sent_before = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
+    r.submaps_sent_before = a.pipeline->submapsSent();
+    a.pipeline.reset();  // a crash: the open window and the map are gone, the spool stays
+    auto pipeline = makePipeline(i, /*fresh=*/false);
+    if (!pipeline) return Error{"agent " + a.name + " reset at " + std::to_string(t) + " s: " + pipeline.error()};
+    a.pipeline = std::move(*pipeline);
+    r.new_session = a.pipeline->session();
+    for (const auto& [session, seq] : a.pipeline->uplink()->buffer().pendingKeys())
+      r.spool_carried += session < r.new_session;
+    a.resets.push_back(r);
+  }
+  return Status::Ok();
 }
 
 Status OfflineRun::createNetwork(const std::string& spool_root) {
@@ -325,6 +377,7 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     const double t = double(k) * c.step_s;
     now_ = t;
     if (Status s = restartServer(t); !s) return s;
+    if (Status s = resetAgents(t); !s) return s;
     deliver(t);
     acknowledge(t);
     for (OfflineAgent& a : agents_) a.pipeline->pollUplink(t);

@@ -186,6 +186,8 @@ RunResults evaluateRun(const OfflineRun& run) {
   m.loops_rejected = sm.loops_rejected;
   m.agents_merged = sm.agents_merged;
   m.frames_refused = sm.frames_refused;
+  m.relocalised = sm.relocalised;
+  m.robots_new = sm.robots_new;
   TimingStats timings = srv.timings();
   const eval::EvalParams& ep = run.params().run.eval;
   std::vector<eval::AgentTrajectories> merged;
@@ -196,12 +198,17 @@ RunResults evaluateRun(const OfflineRun& run) {
     am.bytes = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
     if (run.network())  // what really went onto a link (a robot without a route sends nothing)
       am.bytes = std::llround(run.network()->ownBytes(static_cast<std::size_t>(&a - run.agents().data())));
+    for (const AgentResetRecord& r : a.resets) {  // the pipelines before its resets
+      if (!run.network()) *am.bytes += r.bytes_sent_before;
+      am.submaps_sent = am.submaps_sent.value_or(0) + r.submaps_sent_before;
+    }
     bytes_total += *am.bytes;
     am.submaps_applied = 0;
     if (a.robot) {
       if (const AgentStats* st = srv.bookkeeper().stats(*a.robot))
         am.submaps_applied = static_cast<std::int64_t>(st->submaps_applied);
       server::fillHeldLoad(srv, *a.robot, &am);
+      server::fillSessions(srv.bookkeeper(), *a.robot, &am);
     }
     const Trajectory& gt = a.dataset->info().groundtruth;
     if (!gt.empty() && !a.pipeline->trajectory().empty()) {

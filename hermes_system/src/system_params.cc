@@ -1,6 +1,8 @@
 #include "hermes/system/system_params.h"
 
 #include <cmath>
+#include <iomanip>
+#include <sstream>
 
 namespace hermes::system {
 
@@ -42,7 +44,54 @@ Expected<LinkTrace> LinkParams::makeTrace() const {
   return LinkTrace::constant(bandwidth_mbitps, latency_ms, loss);
 }
 
+Expected<std::vector<AgentReset>> parseAgentResets(const std::string& spec) {
+  std::vector<AgentReset> out;
+  const auto trim = [](std::string v) {
+    const auto b = v.find_first_not_of(" \t");
+    const auto e = v.find_last_not_of(" \t");
+    return b == std::string::npos ? std::string() : v.substr(b, e - b + 1);
+  };
+  if (trim(spec).empty()) return out;
+  std::size_t start = 0;
+  while (start <= spec.size()) {
+    const std::size_t comma = std::min(spec.find(',', start), spec.size());
+    const std::string item = trim(spec.substr(start, comma - start));
+    const std::size_t at = item.rfind('@');
+    const std::string bad = "agent reset '" + item + "' is not NAME@S (S: simulated seconds >= 0)";
+    if (at == std::string::npos || at == 0 || at + 1 == item.size()) return Error{bad};
+    AgentReset r;
+    r.agent = trim(item.substr(0, at));
+    const std::string time = trim(item.substr(at + 1));
+    std::size_t used = 0;
+    try {
+      r.at_s = std::stod(time, &used);
+    } catch (const std::exception&) {
+      return Error{bad};
+    }
+    if (used != time.size() || r.agent.empty() || !std::isfinite(r.at_s) || r.at_s < 0)
+      return Error{bad};
+    out.push_back(r);
+    start = comma + 1;
+  }
+  return out;
+}
+
+std::string formatAgentResets(const std::vector<AgentReset>& resets) {
+  std::string out;
+  for (const AgentReset& r : resets) {
+    std::ostringstream item;
+    item << r.agent << "@" << std::setprecision(17) << r.at_s;
+    out += (out.empty() ? "" : ", ") + item.str();
+  }
+  return out;
+}
+
 Status ClockParams::read(const Config& c) {
+  std::string resets = formatAgentResets(agent_reset);
+  if (Status s = c.get("system.agent_reset", &resets); !s) return s;
+  auto parsed = parseAgentResets(resets);
+  if (!parsed) return Error{"system.agent_reset: " + parsed.error()};
+  agent_reset = std::move(*parsed);
   for (Status s : {c.get("system.step_s", &step_s), c.get("system.server_period_s", &server_period_s),
                    c.get("system.sample_period_s", &sample_period_s),
                    c.get("system.drain_s", &drain_s),
@@ -62,6 +111,10 @@ Status ClockParams::validate() const {
       return Error{"system.server_restart_at: every time must be >= 0 s, got " + std::to_string(t)};
   if (!(server_downtime_s >= 0) || !std::isfinite(server_downtime_s))
     return Error{"system.server_downtime_s must be >= 0"};
+  for (const AgentReset& r : agent_reset)
+    if (r.agent.empty() || !(r.at_s >= 0) || !std::isfinite(r.at_s))
+      return Error{"system.agent_reset: '" + formatAgentResets({r}) +
+                   "' needs an agent name and a time >= 0 s"};
   return Status::Ok();
 }
 
@@ -72,6 +125,7 @@ void ClockParams::write(ConfigWriter& w) const {
   w.set("system.drain_s", drain_s);
   w.set("system.server_restart_at", server_restart_at);
   w.set("system.server_downtime_s", server_downtime_s);
+  w.set("system.agent_reset", formatAgentResets(agent_reset));
 }
 
 Status SystemParams::read(const Config& config) {

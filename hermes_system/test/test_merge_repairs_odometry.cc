@@ -10,29 +10,18 @@
 
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
-#include "support/rendered_hall.h"
+#include "support/hall_run.h"
 
 using namespace hermes;
 
 namespace {
 
 system::RunResults runMeeting(const system::SystemParams& params, const std::string& tag) {
-  const std::string dir = test_support::renderedMeeting();
-  EXPECT_FALSE(dir.empty()) << "rendering failed";
-  std::vector<system::AgentSource> sources;
-  for (const std::string& s : test_support::meetingSequences()) {
-    auto ds = Dataset::open(dir + "/" + s, params.run.dataset);
-    EXPECT_TRUE(ds.ok()) << ds.error();
-    if (!ds.ok()) return {};
-    sources.push_back({s, std::move(*ds), 0});
-  }
-  auto run = system::OfflineRun::create(params, std::move(sources),
-                                        ::testing::TempDir() + "/hermes_meeting_" + tag, HERMES_SOURCE_DIR);
-  EXPECT_TRUE(run.ok()) << run.error();
-  if (!run.ok()) return {};
-  EXPECT_TRUE((*run)->run());
-  system::RunResults r = system::evaluateRun(**run);
-  std::printf("[%s]\n%s", tag.c_str(), system::formatReport(**run, r).c_str());
+  auto run = test_support::makeMeetingRun(params, tag);
+  if (!run) return {};
+  EXPECT_TRUE(run->run());
+  system::RunResults r = system::evaluateRun(*run);
+  std::printf("[%s]\n%s", tag.c_str(), system::formatReport(*run, r).c_str());
   return r;
 }
 
@@ -42,16 +31,10 @@ const AgentMetrics* agentMetrics(const system::RunResults& r, const std::string&
   return nullptr;
 }
 
-system::SystemParams baseParams() {
-  system::SystemParams p;
-  p.run.agent.uplink.buffer.fsync = false;
-  return p;
-}
-
 }  // namespace
 
 TEST(MergeRepairsOdometry, CleanAndCorruptedRobots) {
-  const system::RunResults clean = runMeeting(baseParams(), "clean");
+  const system::RunResults clean = runMeeting(test_support::testRunParams(), "clean");
   ASSERT_EQ(clean.metrics.agents_merged.value_or(0), 2);
   for (const AgentMetrics& a : clean.metrics.per_agent) {
     ASSERT_TRUE(a.raw_ate_rmse_m && a.merged_ate_rmse_m) << a.agent;
@@ -68,7 +51,7 @@ TEST(MergeRepairsOdometry, CleanAndCorruptedRobots) {
   const AgentMetrics* other_clean = agentMetrics(clean, "MH_01_easy");
   ASSERT_TRUE(other_clean && other_clean->merged_ate_rmse_m);
   for (const std::string kind : {"jump", "drift"}) {
-    system::SystemParams p = baseParams();
+    system::SystemParams p = test_support::testRunParams();
     p.corrupt.agent = "MH_02_easy";
     p.corrupt.kind = kind;
     p.corrupt.at_s = kind == "jump" ? 15 : 5;

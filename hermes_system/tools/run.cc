@@ -29,7 +29,8 @@ const char* kUsage =
     "usage: hermes_run --dataset DIR [--dataset DIR2 ...] --out DIR [--config FILE]\n"
     "                  [--set key=value ...] [--no-server]\n"
     "                  [--bandwidth MBITPS | --link-trace FILE | --scenario FILE] [--max-frames N]\n"
-    "                  [--server-restart-at S ...] [--no-plots] [--json] [--quiet]\n"
+    "                  [--server-restart-at S ...] [--agent-reset NAME@S ...]\n"
+    "                  [--no-plots] [--json] [--quiet]\n"
     "Runs one agent per dataset folder (EuRoC ASL stereo or TUM RGB-D layout). With the\n"
     "server (default), all agents and the edge server run in one process on a simulated\n"
     "clock; every agent's uplink crosses ONE shared link (--bandwidth: constant rate in\n"
@@ -58,6 +59,10 @@ const char* kUsage =
     "as in a crash and, system.server_downtime_s later, created again from its checkpoint\n"
     "directory (server.checkpoint_dir, default OUT/server_checkpoint, emptied at the start);\n"
     "metrics.json then holds server_durability and server_restarts.\n"
+    "--agent-reset NAME@S (repeatable; system.agent_reset): at simulated time S [s] agent\n"
+    "NAME restarts with a fresh map and the next session (its spool kept); the server\n"
+    "re-localises it through loops or, after server.relocalisation_timeout_s, reports it\n"
+    "as a new robot (metrics.json relocalised / robots_new, per_agent sessions).\n"
     "--json: print metrics.json to stdout instead of the report.\n"
     "Exit: 0 ok, 1 failure while running, 2 bad input.\n";
 
@@ -95,6 +100,7 @@ struct Args {
   std::string bandwidth, link_trace, scenario;
   long max_frames = -1;
   std::vector<double> restart_at;
+  std::vector<system::AgentReset> agent_reset;
 };
 
 /// Parses argv; returns an error message (empty: ok).
@@ -145,6 +151,11 @@ std::string parseArgs(int argc, char** argv, Args* a) {
       if (v.empty() || *end != '\0' || !(t >= 0) || !std::isfinite(t))
         return "--server-restart-at '" + v + "' is not a time >= 0 s";
       a->restart_at.push_back(t);
+    } else if (arg == "--agent-reset") {
+      if (!value(&v)) return "--agent-reset needs NAME@S (agent name, simulated seconds)";
+      auto parsed = system::parseAgentResets(v);
+      if (!parsed || parsed->size() != 1) return "--agent-reset: " + (parsed ? "'" + v + "' is not one NAME@S" : parsed.error());
+      a->agent_reset.push_back(parsed->front());
     } else if (arg == "--max-frames") {
       if (!value(&v)) return "--max-frames needs N";
       char* end = nullptr;
@@ -166,6 +177,8 @@ std::string parseArgs(int argc, char** argv, Args* a) {
     return "--bandwidth/--link-trace/--scenario need the server (drop --no-server)";
   if (a->no_server && !a->restart_at.empty())
     return "--server-restart-at needs the server (drop --no-server)";
+  if (a->no_server && !a->agent_reset.empty())
+    return "--agent-reset needs the server (drop --no-server)";
   return "";
 }
 
@@ -237,6 +250,7 @@ int main(int argc, char** argv) {
   auto params = system::readSystemParams(*config);
   if (!params.ok()) return badInput(params.error());
   for (double t : args.restart_at) params->clock.server_restart_at.push_back(t);
+  for (const system::AgentReset& r : args.agent_reset) params->clock.agent_reset.push_back(r);
 
   std::vector<system::AgentSource> sources;
   std::set<std::string> names;

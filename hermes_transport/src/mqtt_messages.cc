@@ -2,6 +2,8 @@
 
 #include <cstring>
 
+#include "le_bytes.h"
+
 namespace hermes::transport {
 namespace {
 
@@ -9,15 +11,8 @@ constexpr char kTopicRoot[] = "hermes";
 constexpr std::uint8_t kAckVersion = 1, kHeartbeatVersion = 1;
 constexpr std::size_t kAckFixedBytes = 42, kHeartbeatFixedBytes = 38;
 
-void put(std::vector<std::uint8_t>* out, std::uint64_t v, int n) {
-  for (int i = 0; i < n; ++i) out->push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-}
-
-std::uint64_t get(const std::uint8_t* p, int n) {
-  std::uint64_t v = 0;
-  for (int i = 0; i < n; ++i) v |= std::uint64_t{p[i]} << (8 * i);
-  return v;
-}
+using le::get;
+using le::put;
 
 void putUuid(std::vector<std::uint8_t>* out, const Uuid& id) { out->insert(out->end(), id.begin(), id.end()); }
 
@@ -65,6 +60,7 @@ const char* toString(MqttChannel channel) {
     case MqttChannel::kSubmap: return "submap";
     case MqttChannel::kAck: return "ack";
     case MqttChannel::kHeartbeat: return "heartbeat";
+    case MqttChannel::kGlobalPose: return "global_pose";
   }
   return "?";
 }
@@ -103,6 +99,7 @@ Expected<ParsedTopic> parseMqttTopic(const std::string& topic) {
   if (channel == "submap") t.channel = MqttChannel::kSubmap;
   else if (channel == "ack") t.channel = MqttChannel::kAck;
   else if (channel == "heartbeat") t.channel = MqttChannel::kHeartbeat;
+  else if (channel == "global_pose") t.channel = MqttChannel::kGlobalPose;
   else return Error{"topic '" + topic + "': unknown channel '" + channel + "'"};
   return t;
 }

@@ -89,4 +89,11 @@ Status MqttServerLink::sendAck(const std::string& agent, const AckMessage& ack) 
   return client_->publish(mqttTopic(agent, MqttChannel::kAck), *payload, 2);
 }
 
+Status MqttServerLink::sendGlobalPose(const std::string& agent, const GlobalPoseMessage& msg) {
+  if (Status s = validateAgentName(agent); !s) return Error{"mqtt: " + s.error()};
+  auto payload = encodeGlobalPose(msg);
+  if (!payload) return Error{payload.error()};
+  return client_->publish(mqttTopic(agent, MqttChannel::kGlobalPose), *payload, 0);
+}
+
 }  // namespace hermes::transport

@@ -107,6 +107,9 @@ void to_json(json& j, const AgentMetrics& m) {
   if (m.global_pose_rmse_m) j["global_pose_rmse_m"] = *m.global_pose_rmse_m;
   if (m.global_pose_final_m) j["global_pose_final_m"] = *m.global_pose_final_m;
   if (m.global_pose_updates) j["global_pose_updates"] = *m.global_pose_updates;
+  if (m.sessions) j["sessions"] = *m.sessions;
+  if (m.relocalised) j["relocalised"] = *m.relocalised;
+  if (m.reported_new) j["reported_new"] = *m.reported_new;
 }
 
 void to_json(json& j, const RunMetrics& m) {
@@ -141,6 +144,8 @@ void to_json(json& j, const RunMetrics& m) {
   if (m.rpe_delta) j["rpe_delta"] = *m.rpe_delta;
   if (m.rpe_delta_unit) j["rpe_delta_unit"] = *m.rpe_delta_unit;
   if (!m.frames_refused.empty()) j["frames_refused"] = m.frames_refused;
+  if (m.relocalised) j["relocalised"] = *m.relocalised;
+  if (m.robots_new) j["robots_new"] = *m.robots_new;
 }
 
 // ---------------------------------------------------------------- reading
@@ -266,6 +271,9 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.global_pose_rmse_m = r.number("global_pose_rmse_m", false);
   a.global_pose_final_m = r.number("global_pose_final_m", false);
   a.global_pose_updates = r.integer("global_pose_updates", false);
+  a.sessions = r.integer("sessions", false);
+  a.relocalised = r.integer("relocalised", false);
+  a.reported_new = r.integer("reported_new", false);
   return a;
 }
 
@@ -284,6 +292,8 @@ RunMetrics parseRun(const json& j) {
   m.loops_accepted = r.integer("loops_accepted", true);
   m.loops_rejected = r.integer("loops_rejected", true);
   m.agents_merged = r.integer("agents_merged", true);
+  m.relocalised = r.integer("relocalised", false);
+  m.robots_new = r.integer("robots_new", false);
   const json* timings = r.get("timings_ms", true);
   ObjectReader tr(*timings, "timings_ms");
   for (const auto& [stage, v] : timings->items()) {

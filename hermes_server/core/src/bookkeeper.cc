@@ -37,6 +37,9 @@ Status BookkeeperParams::validate() const {
   if (!(stale_after_s >= 0))
     return Error{"server.bookkeeper.stale_after_s must be >= 0, got " +
                  std::to_string(stale_after_s)};
+  if (!(relocalisation_timeout_s >= 0) || !std::isfinite(relocalisation_timeout_s))
+    return Error{"server.relocalisation_timeout_s must be finite and >= 0, got " +
+                 std::to_string(relocalisation_timeout_s)};
   return Status::Ok();
 }
 
@@ -58,6 +61,25 @@ const char* toString(ArrivalVerdict v) {
     case ArrivalVerdict::kRejected: return "rejected";
   }
   return "?";
+}
+
+const char* toString(SessionAnchor a) {
+  switch (a) {
+    case SessionAnchor::kNone: return "none";
+    case SessionAnchor::kWorld: return "world";
+    case SessionAnchor::kLoop: return "loop";
+  }
+  return "?";
+}
+
+int AgentStats::relocalisedSessions() const {
+  return static_cast<int>(std::count_if(sessions.begin(), sessions.end(),
+                                        [](const auto& s) { return s.second.relocalised; }));
+}
+
+int AgentStats::newRobotSessions() const {
+  return static_cast<int>(std::count_if(sessions.begin(), sessions.end(),
+                                        [](const auto& s) { return s.second.reported_new; }));
 }
 
 double AgentStats::successRate() const {
@@ -161,6 +183,8 @@ ArrivalDecision Bookkeeper::onArrival(const SubmapArrival& arrival, double now) 
     d.new_session = true;
     a.current_session = h.session;
     a.current_session_since = now;
+    a.anchored = false;  // the new session knows nothing of the old one's place
+    a.T_W_A = SE3::identity();
   }
 
   // Accept. Missing = holes between the lowest and highest accepted seq.
@@ -212,9 +236,8 @@ std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotI
                                                const std::function<std::size_t(RobotId)>& group) {
   if (world_) return world_;
   std::vector<RobotId> qualified;
-  double now = -1;
+  const double now = clock();
   for (const AgentStats& a : agents_) {
-    now = std::max(now, a.last_time);
     if (a.keyframes >= static_cast<std::uint64_t>(params_.anchor_min_keyframes)) qualified.push_back(a.robot);
   }
   if (qualified.empty()) return std::nullopt;
@@ -242,26 +265,94 @@ std::optional<RobotId> Bookkeeper::selectWorld(const std::function<double(RobotI
     }
   }
   world_ = best;
-  agents_[best].anchored = true;
-  agents_[best].T_W_A = SE3::identity();
+  // The robot's first session defines the world: the map its loops tie to the
+  // others; a later session (restart, map reset) re-localises against it.
+  AgentStats& w = agents_[best];
+  if (!w.sessions.empty()) {
+    w.sessions.begin()->second.anchored_by = SessionAnchor::kWorld;
+    w.sessions.begin()->second.anchored_at = now;
+  }
+  if (w.sessions.empty() || w.sessions.begin()->first == w.current_session) {
+    w.anchored = true;
+    w.T_W_A = SE3::identity();
+  }
   return world_;
 }
 
 Status Bookkeeper::markAnchored(RobotId robot, const SE3& T_W_A) {
   if (robot >= agents_.size())
     return Error{"bookkeeper: markAnchored for unknown robot id " + std::to_string(robot)};
+  return markSessionAnchored(robot, agents_[robot].current_session, SessionAnchor::kLoop, T_W_A);
+}
+
+Status Bookkeeper::markSessionAnchored(RobotId robot, std::uint32_t session, SessionAnchor by,
+                                       const SE3& T_W_A) {
+  if (robot >= agents_.size())
+    return Error{"bookkeeper: markSessionAnchored for unknown robot id " + std::to_string(robot)};
+  AgentStats& a = agents_[robot];
+  auto it = a.sessions.find(session);
+  if (it == a.sessions.end())
+    return Error{"bookkeeper: cannot anchor " + describe(robot) + " session " +
+                 std::to_string(session) + ": no submap of it was accepted"};
   if (!world_)
     return Error{"bookkeeper: cannot anchor " + describe(robot) +
                  ": the world frame is not fixed yet"};
-  if (robot == *world_ &&
+  SessionStats& s = it->second;
+  const bool world_session = s.anchored_by == SessionAnchor::kWorld;
+  // Only the session selectWorld() chose defines the world: a later session of
+  // the world robot knows nothing of it and needs loops like any other.
+  if (by == SessionAnchor::kWorld && !world_session)
+    return Error{"bookkeeper: " + describe(robot) + " session " + std::to_string(session) +
+                 " does not define the world frame"};
+  if ((world_session || by == SessionAnchor::kWorld) &&
       (!T_W_A.translation().isZero(1e-9) || rotationAngle(T_W_A.rotation()) > 1e-9))
-    return Error{"bookkeeper: " + describe(robot) +
+    return Error{"bookkeeper: " + describe(robot) + " session " + std::to_string(session) +
                  " defines the world frame; its T_W_A must stay identity"};
   if (!T_W_A.translation().allFinite() || !T_W_A.quat().coeffs().allFinite())
     return Error{"bookkeeper: non-finite T_W_A for " + describe(robot)};
-  agents_[robot].anchored = true;
-  agents_[robot].T_W_A = T_W_A;
+  if (s.anchored_by == SessionAnchor::kNone) {
+    s.anchored_by = by;
+    s.anchored_at = clock();
+    const bool later = session != a.sessions.begin()->first;
+    if (later && by == SessionAnchor::kLoop) {
+      s.relocalised = true;
+      s.reported_new = false;
+    }
+  }
+  if (session == a.current_session) {
+    a.anchored = true;
+    a.T_W_A = T_W_A;
+  }
   return Status::Ok();
+}
+
+std::vector<std::pair<RobotId, std::uint32_t>> Bookkeeper::checkRelocalisation(double now) {
+  std::vector<std::pair<RobotId, std::uint32_t>> reported;
+  for (AgentStats& a : agents_) {
+    if (a.sessions.size() < 2) continue;
+    for (auto it = std::next(a.sessions.begin()); it != a.sessions.end(); ++it) {
+      SessionStats& s = it->second;
+      if (s.anchored_by != SessionAnchor::kNone || s.reported_new) continue;
+      if (now - s.first_time < params_.relocalisation_timeout_s) continue;
+      s.reported_new = true;
+      reported.emplace_back(a.robot, it->first);
+    }
+  }
+  return reported;
+}
+
+double Bookkeeper::clock() const {
+  double now = -1;
+  for (const AgentStats& a : agents_) now = std::max(now, a.last_time);
+  return now;
+}
+
+std::optional<std::uint32_t> Bookkeeper::worldSession() const {
+  if (!world_) return std::nullopt;
+  const AgentStats& w = agents_[*world_];
+  for (const auto& [id, s] : w.sessions)
+    if (s.anchored_by == SessionAnchor::kWorld) return id;
+  return w.current_session;  // no submap accepted (anchor_min_keyframes 0)
 }
 
 bool Bookkeeper::anchored(RobotId robot) const {

@@ -13,13 +13,23 @@ using server::ByteWriter;
 
 void saveSession(ByteWriter* w, std::uint32_t id, const SessionStats& s) {
   w->pod(id);
+  w->pod(static_cast<std::uint8_t>(s.anchored_by));
+  w->pod(s.anchored_at);
+  w->flag(s.relocalised);
+  w->flag(s.reported_new);
   for (std::uint64_t v : {s.submaps_accepted, s.highest_seq, s.lowest_seq, s.keyframes}) w->pod(v);
   w->pod(s.first_time);
   w->pod(s.last_time);
 }
 
 bool loadSession(ByteReader* r, std::uint32_t* id, SessionStats* s) {
-  return r->pod(id) && r->pod(&s->submaps_accepted) && r->pod(&s->highest_seq) &&
+  std::uint8_t by = 0;
+  if (!r->pod(id) || !r->pod(&by) || by > static_cast<std::uint8_t>(SessionAnchor::kLoop) ||
+      !r->pod(&s->anchored_at) || !std::isfinite(s->anchored_at) || !r->flag(&s->relocalised) ||
+      !r->flag(&s->reported_new))
+    return false;
+  s->anchored_by = static_cast<SessionAnchor>(by);
+  return r->pod(&s->submaps_accepted) && r->pod(&s->highest_seq) &&
          r->pod(&s->lowest_seq) && r->pod(&s->keyframes) && r->pod(&s->first_time) &&
          r->pod(&s->last_time) && std::isfinite(s->first_time) && std::isfinite(s->last_time);
 }

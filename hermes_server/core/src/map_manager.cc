@@ -391,16 +391,14 @@ void MapManager::runPcm() {
   accepted_ = std::move(accepted);
 }
 
-void MapManager::anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A) {
+void MapManager::anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A, SessionAnchor by) {
   t->anchored = true;
   t->T_W_A = T_W_A;
   for (auto& [id, kf] : t->keyframes) {
     kf.T_W_C = T_W_A * kf.keyframe.T_A_C;
     touched_.insert(keyOf(*t, id));
   }
-  const AgentStats* s = bookkeeper_ ? bookkeeper_->stats(t->agent) : nullptr;
-  if (s && s->current_session == t->session && bookkeeper_->worldAgent() != t->agent)
-    (void)bookkeeper_->markAnchored(t->agent, T_W_A);
+  if (bookkeeper_) (void)bookkeeper_->markSessionAnchored(t->agent, t->session, by, T_W_A);
   graph_dirty_ = true;
 }
 
@@ -434,12 +432,16 @@ bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibili
   };
   const auto world = bookkeeper_->selectWorld(credibility, group);
   if (!world) return false;
-  const AgentStats* ws = bookkeeper_->stats(*world);
-  auto wt = map_.trajectories.find({*world, ws ? ws->current_session : 0});
-  if (wt != map_.trajectories.end() && !wt->second.anchored) {
-    anchorTrajectory(&wt->second, SE3::identity());
-    world_traj_ = wt->first;
-    changed = true;
+  // The world trajectory is fixed once: a later session of the world robot (it
+  // restarted or reset its map) is anchored by loops like any other trajectory,
+  // never put at the origin.
+  if (!world_traj_) {
+    auto wt = map_.trajectories.find({*world, bookkeeper_->worldSession().value_or(0)});
+    if (wt != map_.trajectories.end() && !wt->second.anchored) {
+      anchorTrajectory(&wt->second, SE3::identity(), SessionAnchor::kWorld);
+      world_traj_ = wt->first;
+      changed = true;
+    }
   }
   for (bool progress = true; progress;) {
     progress = false;
@@ -470,7 +472,7 @@ bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibili
                   rotationAngle((o.inverse() * estimates[i]).rotation());
         if (cost < best_cost) best_cost = cost, best = i;
       }
-      anchorTrajectory(&t, estimates[best]);
+      anchorTrajectory(&t, estimates[best], SessionAnchor::kLoop);
       progress = changed = true;
     }
   }

@@ -9,6 +9,8 @@ namespace server {
 
 Status ServerParams::read(const Config& config, const std::string& prefix) {
   if (Status s = bookkeeper.read(config, prefix + "bookkeeper."); !s) return s;
+  if (Status s = config.get(prefix + "relocalisation_timeout_s", &bookkeeper.relocalisation_timeout_s); !s)
+    return s;
   if (Status s = credibility.read(config, prefix); !s) return s;
   if (Status s = map.read(config, prefix); !s) return s;
   if (Status s = auth.read(config, prefix + "auth."); !s) return s;
@@ -19,6 +21,7 @@ Status ServerParams::read(const Config& config, const std::string& prefix) {
 
 void ServerParams::write(ConfigWriter& out, const std::string& prefix) const {
   bookkeeper.write(out, prefix + "bookkeeper.");
+  out.set(prefix + "relocalisation_timeout_s", bookkeeper.relocalisation_timeout_s);
   credibility.write(out, prefix);
   map.write(out, prefix);
   auth.write(out, prefix + "auth.");
@@ -175,6 +178,7 @@ int Server::process(double now, int max_submaps) {
                                .count());
     ++popped;
   }
+  (void)bookkeeper_.checkRelocalisation(now);
   if (popped > 0 && store_ && now - last_checkpoint_ >= params_.checkpoint.period_s)
     (void)checkpoint(now);  // counted and kept in durability(); the journal still holds everything
   return merged;

@@ -165,6 +165,13 @@ void fillHeldLoad(const Server& server, RobotId robot, AgentMetrics* metrics) {
   metrics->held_bytes_peak = static_cast<int64_t>(held ? held->peak_bytes : 0);
 }
 
+void fillSessions(const Bookkeeper& bookkeeper, RobotId robot, AgentMetrics* metrics) {
+  const AgentStats* s = bookkeeper.stats(robot);
+  metrics->sessions = static_cast<int64_t>(s ? s->sessions.size() : 0);
+  metrics->relocalised = s ? s->relocalisedSessions() : 0;
+  metrics->reported_new = s ? s->newRobotSessions() : 0;
+}
+
 RunMetrics mergeMetrics(const Server& server) {
   RunMetrics m;
   const MapManager& mm = server.mapManager();
@@ -179,6 +186,8 @@ void addIntakeMetrics(const Server& server, RunMetrics* m) {
   const Bookkeeper& bk = server.bookkeeper();
   int64_t bytes = 0;
   m->per_agent.clear();
+  m->relocalised.reset();
+  m->robots_new.reset();
   for (RobotId r : bk.robots()) {
     const AgentStats* s = bk.stats(r);
     if (!s) continue;
@@ -189,10 +198,14 @@ void addIntakeMetrics(const Server& server, RunMetrics* m) {
     a.bytes = static_cast<int64_t>(s->bytes_received);
     a.submaps_applied = static_cast<int64_t>(s->submaps_applied);
     fillHeldLoad(server, r, &a);
+    fillSessions(bk, r, &a);
+    m->relocalised = m->relocalised.value_or(0) + *a.relocalised;
+    m->robots_new = m->robots_new.value_or(0) + *a.reported_new;
     bytes += a.bytes.value_or(0);
     m->per_agent.push_back(a);
   }
   m->bytes_total = bytes;
+  if (!m->relocalised) m->relocalised = m->robots_new = 0;
   const ReceiverStats& rs = server.receiverStats();
   m->frames_refused.clear();
   for (std::size_t c = 0; c < kReceiveCodes; ++c) {

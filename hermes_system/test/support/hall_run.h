@@ -1,5 +1,5 @@
 // The offline runner over the rendered hall (rendered_hall.h): one agent per
-// hall sequence, spools under the test temp dir.
+// hall (or meeting) sequence, spools under the test temp dir.
 #pragma once
 
 #include <memory>
@@ -16,5 +16,13 @@ namespace hermes::test_support {
 std::unique_ptr<system::OfflineRun> makeHallRun(const system::SystemParams& params,
                                                 const std::string& tag,
                                                 const std::vector<std::size_t>& max_frames = {});
+
+/// The two robots of renderedMeeting() (30 s each), spools in <test temp
+/// dir>/hermes_meeting_<tag>. Null (with a gtest failure) as makeHallRun.
+std::unique_ptr<system::OfflineRun> makeMeetingRun(const system::SystemParams& params,
+                                                   const std::string& tag);
+
+/// Default system params for tests: the spools do not fsync.
+system::SystemParams testRunParams();
 
 }  // namespace hermes::test_support

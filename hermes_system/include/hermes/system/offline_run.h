@@ -25,6 +25,17 @@
 // uses <spool_root>/../server_checkpoint; the directory is emptied when the run
 // starts (a run starts fresh, like the spools), and the server writes a last
 // checkpoint when the run ends.
+//
+// Agent resets (system.agent_reset, "NAME@S"): at S the agent's pipeline is
+// destroyed as in a crash (its open window and map are lost) and created again
+// over the same spool: a fresh map whose odometry starts at identity (it does
+// not know its old pose) and the next session, fed from the dataset frame due
+// at S. The spool's unacknowledged submaps of the old session are still sent
+// and acknowledged; the server applies them unless they arrive more than
+// server.bookkeeper.stale_after_s after the new session began (stale: only
+// acknowledged). The server then re-localises the new session through loops
+// or, after server.relocalisation_timeout_s, reports it as a new robot
+// (bookkeeper.h); either way it keeps the robot's id.
 #pragma once
 
 #include <functional>
@@ -49,6 +60,16 @@ struct AgentSource {
   std::size_t max_frames = 0;        ///< 0 = all
 };
 
+/// One agent reset of the run (system.agent_reset).
+struct AgentResetRecord {
+  double at_s = 0;                      ///< [s] simulated time
+  std::size_t frame = 0;                ///< the first dataset frame of the new session
+  std::uint32_t old_session = 0, new_session = 0;
+  std::size_t spool_carried = 0;        ///< old-session submaps still in the spool, sent on
+  std::int64_t bytes_sent_before = 0;   ///< the old pipeline's uplink bytes [B]
+  std::int64_t submaps_sent_before = 0; ///< the old pipeline's submaps
+};
+
 struct OfflineAgent {
   std::string name;
   std::unique_ptr<Dataset> dataset;
@@ -64,6 +85,7 @@ struct OfflineAgent {
   /// Body poses in the world as the robot knew them when it tracked each frame
   /// (its odometry through the server's latest world <- odom; from the first one on).
   Trajectory global_track;
+  std::vector<AgentResetRecord> resets;  ///< its restarts / map resets so far
 };
 
 /// One server restart of the run (metrics.json "server_restarts").
@@ -135,6 +157,12 @@ class OfflineRun {
   void sample(double t);
   /// Destroys / re-creates the server at the configured restart times.
   Status restartServer(double t);
+  /// Agent i's pipeline over its spool (emptied first when `fresh`), uplink attached.
+  Expected<std::unique_ptr<agent::AgentPipeline>> makePipeline(std::size_t i, bool fresh);
+  /// Sorts system.agent_reset and checks each names an agent, before its last frame.
+  Status checkResets();
+  /// Recreates the pipelines of the agents due to reset at t (system.agent_reset).
+  Status resetAgents(double t);
   /// Agents past their last frame try their deferred window again (one per period).
   void retryCarriedWindows(double t);
 
@@ -175,6 +203,9 @@ class OfflineRun {
   std::function<void(server::Server&)> server_setup_;
   std::vector<ServerRestart> restarts_;
   std::size_t next_restart_ = 0;
+  std::vector<AgentReset> resets_;  ///< system.agent_reset by time
+  std::size_t next_reset_ = 0;
+  std::string spool_root_;
   double server_up_at_ = -1;  ///< [s] while the server is down: when it comes back
   double now_ = 0, next_sample_ = 0, next_server_ = 0;
 };

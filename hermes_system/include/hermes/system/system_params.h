@@ -39,6 +39,17 @@ struct LinkParams {
   Expected<LinkTrace> makeTrace() const;
 };
 
+/// A robot that restarts or resets its map at `at_s` (system.agent_reset).
+struct AgentReset {
+  std::string agent;  ///< the agent's name
+  double at_s = 0;    ///< [s] simulated time
+  bool operator==(const AgentReset& o) const { return agent == o.agent && at_s == o.at_s; }
+};
+/// "NAME@S[,NAME@S ...]" (spaces around items allowed; empty: none). Errors name
+/// the item that is not NAME@S with S a finite time >= 0.
+Expected<std::vector<AgentReset>> parseAgentResets(const std::string& spec);
+std::string formatAgentResets(const std::vector<AgentReset>& resets);
+
 /// The runner's simulated clock.
 struct ClockParams {
   double step_s = 0.01;          ///< [s] network/ack event resolution
@@ -50,6 +61,11 @@ struct ClockParams {
   /// checkpoint directory (`hermes run --server-restart-at S`).
   std::vector<double> server_restart_at;
   double server_downtime_s = 1.0;  ///< [s] no server between destruction and re-creation
+  /// system.agent_reset ("NAME@S, ...", `hermes run --agent-reset NAME@S`): at
+  /// simulated time S the agent's pipeline is destroyed as in a crash (its open
+  /// window is lost) and created again with a fresh map and the next session,
+  /// going on from the dataset frame due at S (offline_run.h).
+  std::vector<AgentReset> agent_reset;
 
   Status read(const Config& config);
   Status validate() const;

@@ -9,8 +9,11 @@
 // UplinkSender::onReconnect() and everything unacknowledged goes out again (the
 // server drops what it already has).
 //
+// It also receives the robot's place in the world (global_pose, after merges).
+//
 // MqttServerLink (the edge server): receives every robot's frames and
-// heartbeats, publishes each frame's acknowledgement to that robot's ack topic.
+// heartbeats, publishes each frame's acknowledgement to that robot's ack topic
+// and, after merges, each anchored robot's world <- odom (sendGlobalPose).
 // A frame claims the identity of its topic: its uuid must be agentUuid(<agent>)
 // (the ReceiveCode::kRoutingMismatch check), so a robot cannot be acknowledged
 // for another's frames. Malformed payloads are answered (frames, with the reason)
@@ -28,12 +31,16 @@
 
 #include "hermes/server/submap_receiver.h"
 #include "hermes/transport/mqtt_client.h"
+#include "hermes/transport/mqtt_global_pose.h"
 #include "hermes/transport/mqtt_messages.h"
 
 namespace hermes::transport {
 
 struct AgentLinkEvents {
   std::vector<AckMessage> acks;  ///< this robot's acknowledgements, in arrival order
+  /// World <- odom updates for this robot, in arrival order (GlobalPoseState::update
+  /// keeps the newest of its current session).
+  std::vector<GlobalPoseUpdate> global_poses;
   bool resend_all = false;       ///< see above: call UplinkSender::onReconnect()
   bool connected_now = false;    ///< a connection came up in this batch
   std::vector<std::string> problems;  ///< lost connections, malformed or foreign payloads, in words
@@ -41,7 +48,8 @@ struct AgentLinkEvents {
 
 class MqttAgentLink {
  public:
-  /// Client id "<prefix>-agent-<robot>"; subscribes hermes/<robot>/ack (QoS 2).
+  /// Client id "<prefix>-agent-<robot>"; subscribes hermes/<robot>/ack (QoS 2)
+  /// and hermes/<robot>/global_pose (QoS 0).
   /// `uuid` is the robot's (acks for other uuids are reported, not used).
   static Expected<std::unique_ptr<MqttAgentLink>> create(const MqttParams& params,
                                                          const std::string& robot, const Uuid& uuid);
@@ -100,6 +108,9 @@ class MqttServerLink {
   /// published is counted in unsentAcks() (the robot resends, the server acks again).
   ReceiveResult handle(const IncomingFrame& in, const Receive& receive);
   Status sendAck(const std::string& agent, const AckMessage& ack);
+  /// Publishes `msg` on hermes/<agent>/global_pose (QoS 0; the next merge sends a
+  /// newer one, so a lost one costs nothing).
+  Status sendGlobalPose(const std::string& agent, const GlobalPoseMessage& msg);
   std::size_t unsentAcks() const { return unsent_acks_; }
 
  private:

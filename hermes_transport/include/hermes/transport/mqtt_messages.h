@@ -7,6 +7,8 @@
 //                             purpose: a heartbeat queued for an absent server is stale
 //                             by the time it arrives (and mosquitto does not queue QoS 0
 //                             for offline persistent sessions).
+//   hermes/<agent>/global_pose server -> agent, QoS 0: the robot's world <- odom
+//                             after merges (mqtt_global_pose.h)
 // Robot names are 1..64 characters of [A-Za-z0-9_.-] (no MQTT wildcards or level
 // separators, so a name is exactly one topic level).
 //
@@ -51,8 +53,8 @@
 
 namespace hermes::transport {
 
-enum class MqttChannel { kSubmap, kAck, kHeartbeat };
-/// "submap", "ack", "heartbeat".
+enum class MqttChannel { kSubmap, kAck, kHeartbeat, kGlobalPose };
+/// "submap", "ack", "heartbeat", "global_pose".
 const char* toString(MqttChannel channel);
 
 constexpr std::size_t kMaxAgentNameBytes = 64;

@@ -93,6 +93,11 @@ struct AgentMetrics {
   /// the first update, and the error at its last frame [m].
   std::optional<double> global_pose_rmse_m, global_pose_final_m;
   std::optional<int64_t> global_pose_updates;   ///< world <- odom updates it took
+  /// Server: the robot's sessions (a restart or map reset starts one; every
+  /// session keeps the robot's id and entry), of those the later ones verified
+  /// loops tied to the global map (re-localised) and the ones no loop tied
+  /// within server.relocalisation_timeout_s (reported as a new robot).
+  std::optional<int64_t> sessions, relocalised, reported_new;
 };
 
 struct RunMetrics {
@@ -113,6 +118,9 @@ struct RunMetrics {
   std::optional<std::string> rpe_delta_unit;  ///< "s" | "frames"
   /// Server: frames not accepted, by reason ("bad_tag", "quota", ...); omitted when none.
   std::map<std::string, int64_t> frames_refused;
+  /// Server: sessions re-localised / reported as new robots, over all robots
+  /// (per_agent relocalised / reported_new summed).
+  std::optional<int64_t> relocalised, robots_new;
 };
 
 void to_json(nlohmann::json& j, const RunMetrics& m);

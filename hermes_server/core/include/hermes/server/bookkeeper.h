@@ -10,7 +10,20 @@
 // Sessions: an agent that restarts or resets its map sends a higher session
 // number. Keyframe keys are (robot id, session, keyframe id), so keyframe ids
 // reused by the new session never collide with the old ones, whose data is
-// kept. The current session is the highest one seen.
+// kept. The current session is the highest one seen. A reconnect after an
+// outage is not a new session: same robot id, same session, same anchoring.
+//
+// Re-localisation (per session, SessionStats::anchored_by): the session that
+// defines the world frame is anchored by the world rule; any other session,
+// also a later session of the world robot, is anchored only by verified loops
+// to anchored trajectories (MapManager), never put at the origin. A later
+// session of a known robot (it restarted or reset its map and no longer knows
+// its old pose) that loops tie to the global map is re-localised; one that no
+// loop tied within relocalisation_timeout_s (server.relocalisation_timeout_s)
+// of its first arrival is reported as a new robot (checkRelocalisation; a loop
+// that ties it later still re-localises it). Either way it keeps the robot id
+// of its uuid. While a new session is not anchored, the robot (its current
+// session) counts as not anchored.
 //
 // Arrival verdicts for (uuid, session, seq):
 //   accept      first time seen (any order: out-of-order seqs are accepted and
@@ -23,18 +36,18 @@
 //               header (e.g. nil uuid): do not acknowledge
 //
 // Global frame: selectWorld() fixes the world frame (T_W_A = identity, anchored)
-// on one of the agents that have accepted >= anchor_min_keyframes keyframes
-// ("qualified"): among the qualified agents of the largest group that verified
-// inter-robot loops tie together (a map that can merge at once; a robot alone is a
-// group of one), the most credible. It is fixed once (a) a verified loop ties a
-// qualified agent to another (a robot that stays small or stopped early no longer
-// blocks everyone), or (b) anchor_wait_s passed since the first agent qualified
-// (the latest arrival time is the clock; the wait restarts after a checkpoint
-// restore), or (c) the only agent known qualifies. Fixing it as soon as every
-// agent qualified, before any loop, could pick a robot that meets no one soon and
-// leave the robots that already meet each other out of the map. anchor_wait_s < 0
-// keeps the oldest rule: once every agent qualified, the most credible, loops
-// aside. Another agent is anchored by markAnchored(agent,
+// on the first session of one of the agents that have accepted >=
+// anchor_min_keyframes keyframes ("qualified"): among the qualified agents of the
+// largest group that verified inter-robot loops tie together (a map that can merge
+// at once; a robot alone is a group of one), the most credible. It is fixed once
+// (a) a verified loop ties a qualified agent to another (a robot that stays small
+// or stopped early no longer blocks everyone), or (b) anchor_wait_s passed since
+// the first agent qualified (the latest arrival time is the clock; the wait
+// restarts after a checkpoint restore), or (c) the only agent known qualifies.
+// Fixing it as soon as every agent qualified, before any loop, could pick a robot
+// that meets no one soon and leave the robots that already meet each other out of
+// the map. anchor_wait_s < 0 keeps the oldest rule: once every agent qualified,
+// the most credible, loops aside. Another agent is anchored by markAnchored(agent,
 // T_W_A) when a verified loop ties it to an anchored agent.
 #pragma once
 
@@ -65,6 +78,10 @@ struct BookkeeperParams {
   int anchor_min_keyframes = 10;  ///< keyframes an agent must have sent to define the world
   double anchor_wait_s = 30.0;    ///< after this since the first qualified, fix it anyway (< 0: wait for all)
   double stale_after_s = 60.0;    ///< grace for late submaps of a superseded session [s]
+  /// server.relocalisation_timeout_s (read by ServerParams): a later session of a
+  /// known robot that no verified loop tied to the global map this long after its
+  /// first arrival is reported as a new robot [s]
+  double relocalisation_timeout_s = 60.0;
   Status read(const Config& config, const std::string& prefix = "server.bookkeeper.");
   void write(ConfigWriter& out, const std::string& prefix = "server.bookkeeper.") const;
   Status validate() const;
@@ -92,7 +109,19 @@ struct ArrivalDecision {
   std::string reason;        ///< for duplicate / stale / rejected: names the agent (uuid)
 };
 
+/// How a session's trajectory got into the world frame.
+enum class SessionAnchor : std::uint8_t {
+  kNone = 0,   ///< not (yet) anchored
+  kWorld = 1,  ///< defines the world frame (selectWorld)
+  kLoop = 2,   ///< verified loops tied it to anchored trajectories
+};
+const char* toString(SessionAnchor a);
+
 struct SessionStats {
+  SessionAnchor anchored_by = SessionAnchor::kNone;
+  double anchored_at = -1;    ///< arrival clock when anchored [s]
+  bool relocalised = false;   ///< a later session of the robot, anchored by loops
+  bool reported_new = false;  ///< a later session no loop tied within the timeout (so far)
   std::uint64_t submaps_accepted = 0;
   std::uint64_t highest_seq = 0;   ///< highest accepted seq
   std::uint64_t lowest_seq = 0;    ///< lowest accepted seq
@@ -128,6 +157,9 @@ struct AgentStats {
   double bytesPerSecond() const;
   /// Mean observations per landmark over accepted submaps.
   double observationsPerLandmark() const;
+  /// Sessions re-localised / reported as a new robot now (SessionStats flags).
+  int relocalisedSessions() const;
+  int newRobotSessions() const;
 };
 
 /// Not thread-safe: the server's handler owns it and calls it from one thread.
@@ -157,9 +189,22 @@ class Bookkeeper {
   /// agent (also when it was fixed before), nullopt while waiting.
   std::optional<RobotId> selectWorld(const std::function<double(RobotId)>& credibility,
                                      const std::function<std::size_t(RobotId)>& group = nullptr);
-  /// Anchors (or re-anchors) an agent whose frame a verified loop tied to the world.
+  /// Anchors (or re-anchors) an agent's current session, whose frame a verified
+  /// loop tied to the world (markSessionAnchored with kLoop).
   Status markAnchored(RobotId robot, const SE3& T_W_A);
+  /// Session `session` of `robot` is anchored (`by` the world rule or loops) with
+  /// T_W_A; a later session anchored by loops is re-localised. The first call per
+  /// session decides `by`; T_W_A is the robot's when it is its current session.
+  /// Errors: unknown robot or session, no world yet, a non-identity T_W_A for the
+  /// world session, non-finite pose.
+  Status markSessionAnchored(RobotId robot, std::uint32_t session, SessionAnchor by, const SE3& T_W_A);
+  /// Reports as new robots the later sessions that no loop tied to the global
+  /// map within relocalisation_timeout_s of their first arrival (`now`: arrival
+  /// clock). Returns the (robot, session) pairs reported by this call.
+  std::vector<std::pair<RobotId, std::uint32_t>> checkRelocalisation(double now);
   std::optional<RobotId> worldAgent() const { return world_; }
+  /// The world agent's session that defines the world frame (its first).
+  std::optional<std::uint32_t> worldSession() const;
   bool anchored(RobotId robot) const;
   std::optional<SE3> T_W_A(RobotId robot) const;
 
@@ -185,6 +230,7 @@ class Bookkeeper {
   std::set<std::tuple<RobotId, std::uint32_t, std::uint64_t>> applied_;
   std::optional<RobotId> world_;
   std::optional<double> first_qualified_s_;  ///< arrival clock when an agent first qualified
+  double clock() const;  ///< the latest arrival time over agents (-1 before any)
 };
 
 }  // namespace hermes

@@ -30,7 +30,8 @@
 namespace hermes {
 namespace server {
 
-constexpr std::uint32_t kCheckpointVersion = 1;
+/// 2: per-session anchoring and re-localisation state (bookkeeper).
+constexpr std::uint32_t kCheckpointVersion = 2;
 constexpr std::uint32_t kJournalVersion = 1;
 
 struct CheckpointParams {

@@ -2,7 +2,10 @@
 // landmarks under (agent, session, id), keep per-trajectory odometry chains,
 // BoW place recognition per new keyframe, rig-based 17-point loop closure for
 // the candidates, PCM over all loops, anchoring of agents tied to the world by
-// accepted loops, world selection, pose-graph optimisation.
+// accepted loops, world selection, pose-graph optimisation. Anchoring is per
+// trajectory (robot, session): the world trajectory is chosen once, every
+// other one (also a later session of the world robot) needs min_world_loops
+// accepted loops to anchored trajectories (bookkeeper.h: re-localisation).
 #pragma once
 
 #include <functional>
@@ -193,7 +196,8 @@ class MapManager {
   void extendKeyframes(const std::vector<KeyframeKey>& extended, MergeStats* stats);
   void runPcm();
   bool updateAnchoring(const std::function<double(RobotId)>& credibility);
-  void anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A);
+  /// Anchors a trajectory and tells the bookkeeper how (`by`).
+  void anchorTrajectory(TrajectoryMap* t, const SE3& T_W_A, SessionAnchor by);
   /// Information of the bridge between two keyframes of one trajectory that
   /// no odometry edge joins (consecutive windows, or across trimmed ones).
   Mat6 bridgeInformation(const Keyframe& from, const Keyframe& to) const;

@@ -52,7 +52,7 @@ namespace hermes {
 namespace server {
 
 struct ServerParams {
-  BookkeeperParams bookkeeper;    ///< server.bookkeeper.*
+  BookkeeperParams bookkeeper;    ///< server.bookkeeper.*, server.relocalisation_timeout_s
   CredibilityParams credibility;  ///< server.csa, server.w_ts, ...
   MapManagerParams map;           ///< server.place_recognition.*, server.loop_closure.*, ...
   AuthParams auth;                ///< server.auth.*
@@ -111,8 +111,10 @@ class Server {
   /// One received frame (claimed: routing header from the transport, may be null).
   ReceiveResult onFrame(const std::uint8_t* data, std::size_t size, const SubmapHeader* claimed,
                         double now);
-  /// Pops up to max_submaps (< 0: all) in credibility order and merges them.
-  /// Returns how many were merged.
+  /// Pops up to max_submaps (< 0: all) in credibility order and merges them,
+  /// then reports as new robots the later sessions no loop tied within
+  /// server.relocalisation_timeout_s (Bookkeeper::checkRelocalisation). Returns
+  /// how many were merged.
   int process(double now, int max_submaps = -1);
 
   /// Submaps accepted and not merged yet (any thread).

@@ -66,16 +66,20 @@ Expected<std::vector<Vec3>> readPly(const std::string& path);
 /// What the server holds for `robot` awaiting merge, into the agent's metrics
 /// (held_submaps, held_bytes, held_bytes_peak; zeros when nothing ever was).
 void fillHeldLoad(const Server& server, RobotId robot, AgentMetrics* metrics);
+/// The robot's sessions, of them re-localised and reported as new robots
+/// (bookkeeper.h), into the agent's metrics (sessions, relocalised, reported_new).
+void fillSessions(const Bookkeeper& bookkeeper, RobotId robot, AgentMetrics* metrics);
 
 /// The server's share of the metrics JSON: loops_accepted, loops_rejected,
-/// agents_merged, timings_ms, frames_refused; per_agent with keyframes/landmarks/
-/// bytes/submaps and the held load. Both parts below: read it from the thread
-/// that runs process(), or while none runs.
+/// agents_merged, timings_ms, frames_refused, relocalised, robots_new; per_agent
+/// with keyframes/landmarks/bytes/submaps, the held load and the sessions. Both
+/// parts below: read it from the thread that runs process(), or while none runs.
 RunMetrics serverMetrics(const Server& server);
 /// The merging thread's part: loops_accepted, loops_rejected, timings_ms.
 RunMetrics mergeMetrics(const Server& server);
 /// The intake part (with a merge thread running elsewhere: under
-/// Server::lockIntake()): agents_merged, per_agent, bytes_total, frames_refused.
+/// Server::lockIntake()): agents_merged, per_agent, bytes_total, frames_refused,
+/// relocalised, robots_new.
 void addIntakeMetrics(const Server& server, RunMetrics* m);
 
 }  // namespace server
