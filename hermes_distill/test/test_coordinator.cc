@@ -223,16 +223,21 @@ TEST(Coordinator, ProbingSendsMore) {
   EXPECT_LE(static_cast<double>(probe.report.bytes_actual), probe.report.budget_bytes);
 }
 
+/// A 5-s window of fast motion with 25 keyframes (more than max_keyframes).
+Expected<SyntheticWindow> fastWindow() {
+  SyntheticWindowParams wp;
+  wp.keyframe_period_s = 0.2;
+  wp.seed = 5;
+  auto scene = makeSceneFromTum(testing::groundTruthPath("MH_04_difficult"), wp);
+  if (!scene.ok()) return Error{scene.error()};
+  return scene->window(20.0, 1);
+}
+
 // A robot the server has not placed in the global map yet keeps more keyframes
 // per window (places where a loop can tie it in), within the same budget: with
 // 12 a window, two groups of a 10-robot swarm never closed a loop between them.
 TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
-  SyntheticWindowParams wp;
-  wp.keyframe_period_s = 0.2;  // 25 keyframes in 5 s
-  wp.seed = 5;
-  auto scene = makeSceneFromTum(testing::groundTruthPath("MH_04_difficult"), wp);
-  ASSERT_TRUE(scene.ok()) << scene.error();
-  const Expected<SyntheticWindow> w = scene->window(20.0, 1);
+  const Expected<SyntheticWindow> w = fastWindow();
   ASSERT_TRUE(w.ok()) << w.error();
   ASSERT_GE(w->submap.keyframes.size(), 20u);
   DistillParams p;
@@ -259,12 +264,7 @@ TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
 }
 
 TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
-  SyntheticWindowParams wp;
-  wp.keyframe_period_s = 0.2;  // 25 keyframes in 5 s: fast motion
-  wp.seed = 5;
-  auto scene = makeSceneFromTum(testing::groundTruthPath("MH_04_difficult"), wp);
-  ASSERT_TRUE(scene.ok()) << scene.error();
-  const Expected<SyntheticWindow> w = scene->window(20.0, 1);
+  const Expected<SyntheticWindow> w = fastWindow();
   ASSERT_TRUE(w.ok()) << w.error();
   ASSERT_GE(w->submap.keyframes.size(), 20u);
   DistillParams p;
