@@ -586,11 +586,12 @@ class AgentNodelet : public nodelet::Nodelet {
     publishUplinkStatus();
   }
 
-  /// Records a submap the last window step handed to the uplink (call after each step).
+  /// Records every submap handed to the uplink since the last call (a step can
+  /// send two: a carried window and the new one; call after each step).
   void noteSubmitted() {
-    const auto last = pipeline_->lastSubmitted();
-    if (!last || (!created_.empty() && created_.back() == *last)) return;
-    created_.push_back(*last);
+    const auto fresh = pipeline_->submittedFrom(created_.size());
+    if (fresh.empty()) return;
+    created_.insert(created_.end(), fresh.begin(), fresh.end());
     publishUplinkStatus();
   }
 

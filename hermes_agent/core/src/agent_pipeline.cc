@@ -193,6 +193,7 @@ Status AgentPipeline::submitWindow(const Submap& submap, std::vector<std::uint8_
   if (s) {
     last_window_ = key;
     last_window_acked_ = false;
+    submitted_.push_back(key);
   }
   return s;
 }

@@ -162,6 +162,13 @@ class AgentPipeline {
     std::lock_guard<std::mutex> lock(uplink_mu_);
     return last_window_;
   }
+  /// Every (session, seq) handed to the uplink, in order, from index `from` on
+  /// (a caller that keeps count sees each once, however many windows one step sent).
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> submittedFrom(std::size_t from) const {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    if (from >= submitted_.size()) return {};
+    return {submitted_.begin() + static_cast<std::ptrdiff_t>(from), submitted_.end()};
+  }
   std::uint32_t session() const { return session_; }
 
   /// The server's world <- odometry for this robot after a merge (global_pose.h);
@@ -211,6 +218,7 @@ class AgentPipeline {
   std::uint32_t session_ = 1;
   mutable std::mutex global_mu_;
   GlobalPoseState global_pose_;
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> submitted_;  ///< under uplink_mu_
   std::unique_ptr<UplinkSender> uplink_;
   double clock_offset_ = 0;
   std::function<double()> uplink_clock_;
