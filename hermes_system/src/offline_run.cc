@@ -1,10 +1,12 @@
 #include "hermes/system/offline_run.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <thread>
 
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/server/server_outputs.h"
@@ -91,19 +93,10 @@ Expected<std::unique_ptr<agent::AgentPipeline>> OfflineRun::makePipeline(std::si
   Status s = (*pipeline)->attachUplink(
       [this, i](std::uint32_t session, std::uint64_t seq, const std::vector<std::uint8_t>& frame) {
         OfflineAgent& sender = agents_[i];
-        if (!sender.sent.insert({session, seq}).second) ++sender.resent;
-        if (network_) {
-          network_->send(i, session, seq, frame, now_);
-          return;
-        }
-        LinkMessage m;
-        m.sender = static_cast<int>(i);
-        m.id = next_message_++;
-        m.bytes = frame.size();
-        m.payload = std::make_shared<const std::vector<std::uint8_t>>(frame);
-        m.send_time = now_;
-        messages_[m.id] = MessageKey{i, session, seq};
-        link_->send(std::move(m), now_);
+        if (holding_)
+          sender.held.push_back({sender.feeding_stamp, session, seq, frame});
+        else
+          transmit(i, session, seq, frame);
       },
       a.clock_offset);
   if (!s) return Error{s.error()};
@@ -253,34 +246,87 @@ void OfflineRun::sendGlobalPoses(double t) {
       if (agents_[i].robot == robot) globals_.push_back({t + s.latency_ms * 1e-3, i, update});
 }
 
-Status OfflineRun::feedDueFrames(double t) {
-  while (true) {  // the earliest due frame over all agents first
-    OfflineAgent* next = nullptr;
-    double best = std::numeric_limits<double>::infinity();
-    for (OfflineAgent& a : agents_) {
-      if (a.next >= a.frames) continue;
-      const double ts = a.dataset->frameTime(a.next) - a.clock_offset;
-      if (ts <= t && ts < best) {
-        best = ts;
-        next = &a;
-      }
-    }
-    if (!next) return Status::Ok();
-    auto frame = loadCameraFrame(*next->dataset, next->next);
+void OfflineRun::transmit(std::size_t i, std::uint32_t session, std::uint64_t seq,
+                          const std::vector<std::uint8_t>& frame) {
+  OfflineAgent& sender = agents_[i];
+  if (!sender.sent.insert({session, seq}).second) ++sender.resent;
+  if (network_) {
+    network_->send(i, session, seq, frame, now_);
+    return;
+  }
+  LinkMessage m;
+  m.sender = static_cast<int>(i);
+  m.id = next_message_++;
+  m.bytes = frame.size();
+  m.payload = std::make_shared<const std::vector<std::uint8_t>>(frame);
+  m.send_time = now_;
+  messages_[m.id] = MessageKey{i, session, seq};
+  link_->send(std::move(m), now_);
+}
+
+Status OfflineRun::feedAgent(std::size_t i, double t) {
+  OfflineAgent& a = agents_[i];
+  while (a.next < a.frames) {
+    const double ts = a.dataset->frameTime(a.next) - a.clock_offset;
+    if (ts > t) break;
+    a.feeding_stamp = ts;
+    auto frame = loadCameraFrame(*a.dataset, a.next);
     if (!frame.ok())
-      return Error{"agent " + next->name + ": frame " + std::to_string(next->next) + ": " +
-                   frame.error()};
-    auto r = next->pipeline->feed(*frame);
-    if (!r.ok()) return Error{"frame " + std::to_string(next->next) + ": " + r.error()};
-    const Trajectory& odo = next->pipeline->trajectory();
+      return Error{"agent " + a.name + ": frame " + std::to_string(a.next) + ": " + frame.error()};
+    auto r = a.pipeline->feed(*frame);
+    if (!r.ok()) return Error{"agent " + a.name + ": frame " + std::to_string(a.next) + ": " + r.error()};
+    const Trajectory& odo = a.pipeline->trajectory();
     if (!odo.empty() && odo.back().t == frame->stamp)
-      if (const auto T_W_B = next->pipeline->globalPose().inWorld(odo.back().T_W_B))
-        next->global_track.push_back({frame->stamp, *T_W_B});
-    if (++next->next == next->frames) {
-      next->pipeline->flushWindow();  // the last, partial window
-      next->next_retry = t + params_.run.agent.tracker.window.period_s;
+      if (const auto T_W_B = a.pipeline->globalPose().inWorld(odo.back().T_W_B))
+        a.global_track.push_back({frame->stamp, *T_W_B});
+    if (++a.next == a.frames) {
+      a.pipeline->flushWindow();  // the last, partial window
+      a.next_retry = t + params_.run.agent.tracker.window.period_s;
     }
   }
+  return Status::Ok();
+}
+
+Status OfflineRun::feedDueFrames(double t) {
+  std::vector<std::size_t> due;
+  for (std::size_t i = 0; i < agents_.size(); ++i) {
+    const OfflineAgent& a = agents_[i];
+    if (a.next < a.frames && a.dataset->frameTime(a.next) - a.clock_offset <= t) due.push_back(i);
+  }
+  if (due.empty()) return Status::Ok();
+  std::vector<Status> status(agents_.size(), Status::Ok());
+  holding_ = true;
+  const std::size_t threads =
+      std::min<std::size_t>(std::max(1, params_.clock.agent_threads), due.size());
+  std::atomic<std::size_t> next{0};
+  auto work = [&] {
+    for (std::size_t k; (k = next.fetch_add(1)) < due.size();) status[due[k]] = feedAgent(due[k], t);
+  };
+  std::vector<std::thread> workers;
+  for (std::size_t w = 1; w < threads; ++w) workers.emplace_back(work);
+  work();
+  for (std::thread& w : workers) w.join();
+  holding_ = false;
+  // On the link in the order one thread feeding the earliest frame first sends them.
+  struct Ref {
+    double stamp;
+    std::size_t agent, k;
+  };
+  std::vector<Ref> order;
+  for (std::size_t i : due)
+    for (std::size_t k = 0; k < agents_[i].held.size(); ++k)
+      order.push_back({agents_[i].held[k].stamp, i, k});
+  std::stable_sort(order.begin(), order.end(), [](const Ref& x, const Ref& y) {
+    return x.stamp < y.stamp || (x.stamp == y.stamp && x.agent < y.agent);
+  });
+  for (const Ref& r : order) {
+    const OfflineAgent::HeldSend& h = agents_[r.agent].held[r.k];
+    transmit(r.agent, h.session, h.seq, h.frame);
+  }
+  for (std::size_t i : due) agents_[i].held.clear();
+  for (std::size_t i : due)
+    if (!status[i]) return status[i];
+  return Status::Ok();
 }
 
 void OfflineRun::retryCarriedWindows(double t) {

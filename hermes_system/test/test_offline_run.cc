@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <numeric>
 
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
@@ -144,4 +145,63 @@ TEST(OfflineRun, LossAndOutageStillDeliverEveryWindowOnceAndRepeat) {
       EXPECT_NEAR(*r.metrics.ate_rmse_m, *first.metrics.ate_rmse_m, 0.25 * *first.metrics.ate_rmse_m);
     }
   }
+}
+
+TEST(OfflineRun, AgentsSideBySideGiveTheSameRunAsOneThread) {
+  // Two threads feed the agents of a step at once; their sends reach the lossy,
+  // narrow link in one-thread order, so every seeded loss draw, acknowledgement
+  // and merge is the same. Selections without a wall-clock limit that binds
+  // (the MILP's time limit is the runner's only other source of variation).
+  const std::string trace = ::testing::TempDir() + "/hermes_offline_threads_trace.csv";
+  std::ofstream(trace) << "time_s,rate_mbitps,latency_ms,loss\n0,1,30,0.15\n";
+  system::SystemParams p = baseParams();
+  p.link.trace = trace;
+  p.run.agent.distill.strategy = "stability";
+  p.run.agent.distill.trim_time_limit_s = 60;
+  p.run.agent.uplink.buffer.resend_timeout_s = 3.0;
+  struct Outcome {
+    std::vector<Trajectory> odometry;
+    std::vector<BandwidthSample> bandwidth;
+    std::vector<std::size_t> acked, lost, resent;
+    std::size_t merged = 0;
+    double ate = -1;
+  };
+  std::vector<Outcome> out;
+  for (int threads : {1, 2}) {
+    p.clock.agent_threads = threads;
+    auto run = test_support::makeHallRun(p, "threads" + std::to_string(threads), {300, 300, 300});
+    ASSERT_TRUE(run);
+    ASSERT_TRUE(run->run());
+    const system::RunResults r = system::evaluateRun(*run);
+    Outcome o;
+    for (const system::OfflineAgent& a : run->agents()) {
+      o.odometry.push_back(a.pipeline->trajectory());
+      o.acked.push_back(a.acked);
+      o.lost.push_back(a.lost_messages);
+      o.resent.push_back(a.resent);
+    }
+    o.bandwidth = run->bandwidth();
+    o.merged = run->server().counters().merged;
+    if (r.metrics.ate_rmse_m) o.ate = *r.metrics.ate_rmse_m;
+    out.push_back(std::move(o));
+  }
+  const Outcome &one = out[0], &two = out[1];
+  EXPECT_GT(std::accumulate(one.lost.begin(), one.lost.end(), std::size_t{0}), 0u)
+      << "no message was lost: the link order is not exercised";
+  EXPECT_GT(one.merged, 0u);
+  ASSERT_EQ(one.odometry.size(), two.odometry.size());
+  for (std::size_t i = 0; i < one.odometry.size(); ++i) {
+    ASSERT_EQ(one.odometry[i].size(), two.odometry[i].size()) << "agent " << i;
+    for (std::size_t k = 0; k < one.odometry[i].size(); ++k)
+      ASSERT_TRUE(one.odometry[i][k].T_W_B.matrix() == two.odometry[i][k].T_W_B.matrix())
+          << "agent " << i << " pose " << k;
+  }
+  EXPECT_EQ(one.acked, two.acked);
+  EXPECT_EQ(one.lost, two.lost);
+  EXPECT_EQ(one.resent, two.resent);
+  EXPECT_EQ(one.merged, two.merged);
+  EXPECT_EQ(one.ate, two.ate);
+  ASSERT_EQ(one.bandwidth.size(), two.bandwidth.size());
+  for (std::size_t k = 0; k < one.bandwidth.size(); ++k)
+    EXPECT_EQ(one.bandwidth[k].kBps, two.bandwidth[k].kBps) << "sample " << k;
 }

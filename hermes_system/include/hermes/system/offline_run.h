@@ -12,6 +12,13 @@
 //   every server_period_s: Server::process (credibility order, merge, loops, graph)
 // After the last frame the link runs on for at most drain_s so the backlog arrives.
 //
+// Agents side by side (system.agent_threads): within one clock step the agents
+// do not see each other (what one sends reaches the link, and so anyone, only
+// when the link is advanced at the next step), so each agent's due frames are
+// fed on a worker thread of its own and the submaps they hand to the transport
+// are held and put on the link afterwards in the order one thread would have
+// sent them (frame stamp, then agent index). Same results for any thread count.
+//
 // Scenario runs (link.scenario, scenario.h): instead of the one shared link, a
 // link per robot to the server and between robots (RelayNetwork): robots out of
 // the server's reach hand their submaps to a relay robot (relay.*).
@@ -86,6 +93,15 @@ struct OfflineAgent {
   /// (its odometry through the server's latest world <- odom; from the first one on).
   Trajectory global_track;
   std::vector<AgentResetRecord> resets;  ///< its restarts / map resets so far
+  /// A submap handed to the transport during a step, put on the link after it.
+  struct HeldSend {
+    double stamp;  ///< sim time of the frame whose feed sent it
+    std::uint32_t session;
+    std::uint64_t seq;
+    std::vector<std::uint8_t> frame;
+  };
+  std::vector<HeldSend> held;  ///< this step's sends, in the agent's order
+  double feeding_stamp = 0;    ///< sim time of the frame being fed
 };
 
 /// One server restart of the run (metrics.json "server_restarts").
@@ -146,7 +162,14 @@ class OfflineRun {
 
  private:
   OfflineRun(SystemParams params, std::unique_ptr<server::Server> server);
+  /// Feeds every agent's due frames (side by side, system.agent_threads), then
+  /// transmits what they sent in single-thread order.
   Status feedDueFrames(double t);
+  /// Agent i's frames due by t, in order (runs on a worker thread).
+  Status feedAgent(std::size_t i, double t);
+  /// Puts agent i's submap on the link (or the scenario's network) now.
+  void transmit(std::size_t i, std::uint32_t session, std::uint64_t seq,
+                const std::vector<std::uint8_t>& frame);
   void deliver(double t);
   /// A submap of agent `i` reached the server at `arrival`: whether it is acknowledged.
   bool receive(std::size_t i, std::uint32_t session, std::uint64_t seq,
@@ -208,6 +231,7 @@ class OfflineRun {
   std::string spool_root_;
   double server_up_at_ = -1;  ///< [s] while the server is down: when it comes back
   double now_ = 0, next_sample_ = 0, next_server_ = 0;
+  bool holding_ = false;  ///< inside feedDueFrames: sends are held per agent
 };
 
 }  // namespace hermes::system

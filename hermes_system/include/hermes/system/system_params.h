@@ -56,6 +56,9 @@ struct ClockParams {
   double server_period_s = 0.5;  ///< [s] the server merges its queue this often
   double sample_period_s = 1.0;  ///< [s] bandwidth CSV interval
   double drain_s = 60;           ///< [s] after the last frame, time allowed to deliver the rest
+  /// Agents fed side by side within a clock step (offline_run.h); 1 = one after
+  /// another. The results do not depend on it.
+  int agent_threads = 2;
   /// [s] simulated times at which the server object is destroyed without a
   /// clean shutdown and, server_downtime_s later, created again from its
   /// checkpoint directory (`hermes run --server-restart-at S`).
