@@ -198,6 +198,20 @@ Status AgentPipeline::submitWindow(const Submap& submap, std::vector<std::uint8_
   return s;
 }
 
+WindowSink AgentPipeline::makeSink(double now, double backlog_bytes, std::mutex* lock) {
+  WindowSink sink;
+  sink.link_now = now;
+  sink.backlog_bytes = backlog_bytes;
+  sink.loop_closures = loop_closures_.load();
+  sink.placed = globalPose().latest().has_value();
+  sink.submit = [this, now, lock](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
+    if (!lock) return submitWindow(submap, std::move(bytes), now);
+    std::lock_guard<std::mutex> guard(*lock);
+    return submitWindow(submap, std::move(bytes), now);
+  };
+  return sink;
+}
+
 void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   if (!uplink_) {
     if (retry_carry)
@@ -208,14 +222,7 @@ void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   }
   const double now = uplink_clock_ ? uplink_clock_()
                                    : (retry_carry ? stamp : last_stamp_) - clock_offset_;
-  WindowSink sink;
-  sink.link_now = now;
-  sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
-  sink.loop_closures = loop_closures_;
-  sink.placed = globalPose().latest().has_value();
-  sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
-    return submitWindow(submap, std::move(bytes), now);
-  };
+  const WindowSink sink = makeSink(now, static_cast<double>(uplink_->backlogBytes()), nullptr);
   if (retry_carry)
     agent::retryCarriedWindow(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
   else
@@ -325,8 +332,7 @@ void AgentPipeline::runWindowJob(WindowJob& job) {
   // Plan with a copy of the monitor and the backlog taken now: the uplink lock
   // is held only to read them and to submit, never while distilling.
   BandwidthMonitor monitor = monitor_;
-  WindowSink sink;
-  double now = 0;
+  double now = 0, backlog = 0;
   bool have_uplink = false;
   {
     std::lock_guard<std::mutex> lock(uplink_mu_);
@@ -334,16 +340,10 @@ void AgentPipeline::runWindowJob(WindowJob& job) {
     if (uplink_) {
       have_uplink = true;
       monitor = uplink_->monitor();
-      sink.backlog_bytes = static_cast<double>(uplink_->backlogBytes());
+      backlog = static_cast<double>(uplink_->backlogBytes());
     }
   }
-  sink.link_now = now;
-  sink.loop_closures = loop_closures_.load();
-  sink.placed = globalPose().latest().has_value();
-  sink.submit = [&](const Submap& submap, std::vector<std::uint8_t>&& bytes) -> Status {
-    std::lock_guard<std::mutex> lock(uplink_mu_);
-    return submitWindow(submap, std::move(bytes), now);
-  };
+  const WindowSink sink = makeSink(now, backlog, &uplink_mu_);
   const WindowSink* out = have_uplink ? &sink : nullptr;
   WindowCounters& c = stage_windows_;
   TimingStats t;

@@ -190,6 +190,9 @@ class AgentPipeline {
   /// Hands an encoded window to the uplink at uplink time `now` (parallel mode:
   /// under uplink_mu_) and tells the monitor whether the previous one arrived.
   Status submitWindow(const Submap& submap, std::vector<std::uint8_t>&& bytes, double now);
+  /// The sink of a window step at uplink time `now`: what the server reported
+  /// (loops, placed) and submitWindow, under `lock` when given (threaded mode).
+  WindowSink makeSink(double now, double backlog_bytes, std::mutex* lock);
 
   /// Parallel mode: one job of the uplink stage.
   struct WindowJob {
