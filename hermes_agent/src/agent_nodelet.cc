@@ -53,9 +53,10 @@
 // Relay robots (ROS transport only; README "Relay robots on ROS"): ~relay_via R
 // sends this robot's submaps and heartbeats not to /hermes/* but to the relay
 // robot R's topics /R/relay/submap and /R/relay/heartbeat, and takes its
-// acknowledgements from R: /R/relay/held (R spooled the submap: the hop
-// acknowledgement, UplinkSender::onHandedOver), /R/relay/submap_ack (the
-// server's, passed on) and /R/relay/global_pose. Always through R, even when
+// acknowledgements from R's topics for it (U = this robot): /R/relay/U/held (R
+// spooled the submap: the hop acknowledgement, UplinkSender::onHandedOver),
+// /R/relay/U/submap_ack (the server's, passed on; R keeps them while U does not
+// listen) and /R/relay/U/global_pose. Always through R, even when
 // the server is reachable (no fallback). When R connects (R started or came
 // back) everything unacknowledged is offered again (R answers what the server
 // already acknowledged with that acknowledgement). ~relay_for "U1,U2" makes
@@ -65,7 +66,8 @@
 // /hermes/submap paced by its coordinator (relay_split.h, relay.min_mbitps per
 // relayed robot, re-split every system.server_period_s, on its own uplink
 // estimate) and passes /hermes/submap_ack and /hermes/global_pose of its
-// origins on; a 50 ms wall timer forwards. A relay reaches the server itself
+// origins on; a 50 ms wall timer forwards; when a subscriber of /hermes/submap
+// connects (the server started or came back) it sends everything held again. A relay reaches the server itself
 // (~relay_via and ~relay_for together are refused: no chains).
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
@@ -115,6 +117,14 @@ class AgentNodelet : public nodelet::Nodelet {
  private:
   using Status = hermes::Status;
   using CameraCalibration = hermes::CameraCalibration;
+
+  /// Relay: per relayed robot, its answer topics and the server acknowledgements
+  /// waiting for it to listen (the map is made in onInit, then only read).
+  struct RelayOut {
+    ros::Publisher held, ack, global;
+    std::vector<hermes_msgs::SubmapAck> waiting;  ///< under relay_out_mu_
+    int listening = 0;  ///< subscribers of `ack` in the robot's namespace (/U/..., as agent.launch runs it)
+  };
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
@@ -245,11 +255,12 @@ class AgentNodelet : public nodelet::Nodelet {
       submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>(
           r + "submap", 20, [this](const ros::SingleSubscriberPublisher&) { onRelayConnected(); });
       heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>(r + "heartbeat", 5);
-      ack_sub_ = nh.subscribe(r + "submap_ack", 100, &AgentNodelet::onAck, this);
-      held_sub_ = nh.subscribe(r + "held", 100, &AgentNodelet::onHeld, this);
-      global_sub_ = nh.subscribe(r + "global_pose", 20, &AgentNodelet::onGlobalPose, this);
+      const std::string mine = r + robot_ + "/";  // R's topics for this robot
+      ack_sub_ = nh.subscribe(mine + "submap_ack", 100, &AgentNodelet::onAck, this);
+      held_sub_ = nh.subscribe(mine + "held", 100, &AgentNodelet::onHeld, this);
+      global_sub_ = nh.subscribe(mine + "global_pose", 20, &AgentNodelet::onGlobalPose, this);
     } else {
-      submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
+      if (relay_for_.empty()) submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
       heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
       ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
       global_sub_ = nh.subscribe("/hermes/global_pose", 20, &AgentNodelet::onGlobalPose, this);
@@ -360,10 +371,19 @@ class AgentNodelet : public nodelet::Nodelet {
     }
     relay_ = std::move(*f);
     relay_initial_Bps_ = params_.uplink.monitor.initial_bps;
+    // The server subscribed (started, or back): what the relay holds goes at once.
+    submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>(
+        "/hermes/submap", 20, [this](const ros::SingleSubscriberPublisher&) { relay_->onReconnect(); });
     const std::string r = "/" + robot_ + "/relay/";
-    relay_held_pub_ = nh.advertise<hermes_msgs::SubmapAck>(r + "held", 100);
-    relay_ack_pub_ = nh.advertise<hermes_msgs::SubmapAck>(r + "submap_ack", 100);
-    relay_global_pub_ = nh.advertise<hermes_msgs::GlobalPose>(r + "global_pose", 20);
+    for (const std::string& o : relay_for_) {  // per relayed robot: its answers
+      RelayOut& out = relay_out_[o];
+      out.held = nh.advertise<hermes_msgs::SubmapAck>(r + o + "/held", 100);
+      out.ack = nh.advertise<hermes_msgs::SubmapAck>(
+          r + o + "/submap_ack", 100,
+          [this, o](const ros::SingleSubscriberPublisher& p) { onAckListener(o, p.getSubscriberName(), +1); },
+          [this, o](const ros::SingleSubscriberPublisher& p) { onAckListener(o, p.getSubscriberName(), -1); });
+      out.global = nh.advertise<hermes_msgs::GlobalPose>(r + o + "/global_pose", 20);
+    }
     relay_submap_sub_ = nh.subscribe(r + "submap", 100, &AgentNodelet::onRelaySubmap, this);
     relay_heartbeat_sub_ = nh.subscribe(r + "heartbeat", 20, &AgentNodelet::onRelayHeartbeat, this);
     relay_timer_ = nh.createWallTimer(ros::WallDuration(0.05), &AgentNodelet::onRelayTimer, this);
@@ -405,14 +425,42 @@ class AgentNodelet : public nodelet::Nodelet {
     a.session = m->session;
     a.seq = m->seq;
     if (*offer != hermes::agent::RelaySpool::Offer::kAlreadyAcked) {
-      a.status = hermes_msgs::SubmapAck::ACCEPTED;
-      relay_held_pub_.publish(a);
+      a.status = hermes_msgs::SubmapAck::ACCEPTED;  // lost if the origin is not connected: it offers again
+      relay_out_.at(origin).held.publish(a);
       return;
     }
     a.status = hermes_msgs::SubmapAck::DUPLICATE;  // the server's acknowledgement, again
     a.reason_code = hermes_msgs::SubmapAck::REASON_REPLAY;
     a.reason = "acknowledged by the server through relay " + robot_;
-    relay_ack_pub_.publish(a);
+    passAck(origin, a);
+  }
+
+  /// Relay: the server's acknowledgement goes to `origin` when it listens, else it
+  /// waits (a handed-over submap is not offered again before the relay reconnects,
+  /// so a lost one would stay in the origin's spool).
+  void passAck(const std::string& origin, const hermes_msgs::SubmapAck& a) {
+    auto it = relay_out_.find(origin);
+    if (it == relay_out_.end()) return;  // an earlier run's origin: nobody to tell
+    std::lock_guard<std::mutex> lock(relay_out_mu_);
+    it->second.waiting.push_back(a);
+    flushAcks(it->second);
+  }
+
+  /// A node subscribed to / left `origin`'s submap_ack: the origin itself when
+  /// it runs in the origin's namespace (an observer such as rostopic echo does not count).
+  void onAckListener(const std::string& origin, const std::string& node, int change) {
+    if (node.rfind("/" + origin + "/", 0) != 0) return;
+    std::lock_guard<std::mutex> lock(relay_out_mu_);
+    RelayOut& out = relay_out_.at(origin);
+    out.listening = std::max(0, out.listening + change);
+    flushAcks(out);
+  }
+
+  /// Publishes the waiting acknowledgements of one origin if it listens (relay_out_mu_ held).
+  void flushAcks(RelayOut& out) {
+    if (out.listening == 0) return;
+    for (const hermes_msgs::SubmapAck& a : out.waiting) out.ack.publish(a);
+    out.waiting.clear();
   }
 
   /// Relay: a relayed robot's heartbeat goes on to the server (its name there).
@@ -432,6 +480,8 @@ class AgentNodelet : public nodelet::Nodelet {
         });
     }
     relay_->poll(now, uplink_Bps);  // never under mu_: the uplink thread calls the relay under its lock
+    std::lock_guard<std::mutex> lock(relay_out_mu_);
+    for (auto& [origin, out] : relay_out_) flushAcks(out);
   }
 
   /// Origin: the relay robot connected to our submaps (started, or back):
@@ -662,8 +712,9 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   void onGlobalPose(const hermes_msgs::GlobalPoseConstPtr& m) {
-    if (relay_ && !relay_->originOfUuid(m->agent_uuid).empty()) {  // never this robot's own
-      relay_global_pub_.publish(m);  // a relayed robot's: passed on
+    if (const std::string origin = relay_ ? relay_->originOfUuid(m->agent_uuid) : std::string();
+        !origin.empty()) {  // a relayed robot's (never this robot's own): passed on
+      if (auto it = relay_out_.find(origin); it != relay_out_.end()) it->second.global.publish(m);
       return;
     }
     std::lock_guard<std::mutex> lock(mu_);
@@ -696,7 +747,7 @@ class AgentNodelet : public nodelet::Nodelet {
         !origin.empty()) {  // a relayed robot's (never this robot's own): freed here unless refused, passed on
       if (a->status != hermes_msgs::SubmapAck::REJECTED)
         relay_->onServerAck(origin, a->session, a->seq, ros::WallTime::now().toSec());
-      relay_ack_pub_.publish(a);
+      passAck(origin, *a);
       return;
     }
     std::lock_guard<std::mutex> lock(mu_);
@@ -904,7 +955,8 @@ class AgentNodelet : public nodelet::Nodelet {
   ros::Subscriber ack_sub_, done_sub_, info_a_sub_, info_b_sub_, image_a_sub_, image_b_sub_;
   tf2_ros::TransformBroadcaster tf_;
   ros::WallTimer timer_, mqtt_timer_;
-  ros::Publisher relay_held_pub_, relay_ack_pub_, relay_global_pub_;
+  std::map<std::string, RelayOut> relay_out_;  ///< relay: per relayed robot
+  std::mutex relay_out_mu_;
   ros::Subscriber relay_submap_sub_, relay_heartbeat_sub_, held_sub_;
   ros::WallTimer relay_timer_;  ///< last: stopped first
   double last_heartbeat_ = 0;
