@@ -56,19 +56,20 @@
 // acknowledgements from R's topics for it (U = this robot): /R/relay/U/held (R
 // spooled the submap: the hop acknowledgement, UplinkSender::onHandedOver),
 // /R/relay/U/submap_ack (the server's, passed on; R keeps them while U does not
-// listen) and /R/relay/U/global_pose. Always through R, even when
-// the server is reachable (no fallback). When R connects (R started or came
-// back) everything unacknowledged is offered again (R answers what the server
-// already acknowledged with that acknowledgement). ~relay_for "U1,U2" makes
-// this robot the relay of U1 and U2: it subscribes /<robot>/relay/submap and
-// .../heartbeat, spools the submaps per origin on disk (~relay_spool_dir,
+// listen) and /R/relay/U/global_pose. Always through R, even when the server is
+// reachable (no fallback). When R connects (a node in R's namespace: R started
+// or came back) everything unacknowledged is offered again (R answers what the
+// server already acknowledged with that acknowledgement). ~relay_for "U1,U2"
+// makes this robot the relay of U1 and U2: it subscribes /<robot>/relay/submap
+// and .../heartbeat, spools the submaps per origin on disk (~relay_spool_dir,
 // default <spool_dir>.relay; RelayForwarder over RelaySpool), forwards them to
 // /hermes/submap paced by its coordinator (relay_split.h, relay.min_mbitps per
 // relayed robot, re-split every system.server_period_s, on its own uplink
 // estimate) and passes /hermes/submap_ack and /hermes/global_pose of its
 // origins on; a 50 ms wall timer forwards; when a subscriber of /hermes/submap
-// connects (the server started or came back) it sends everything held again. A relay reaches the server itself
-// (~relay_via and ~relay_for together are refused: no chains).
+// connects (the server started or came back) it sends everything held again.
+// A relay reaches the server itself (~relay_via and ~relay_for together are
+// refused: no chains).
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/GlobalPose.h>
@@ -253,7 +254,7 @@ class AgentNodelet : public nodelet::Nodelet {
     } else if (!relay_via_.empty()) {  // everything through the relay robot's topics
       const std::string r = "/" + relay_via_ + "/relay/";
       submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>(
-          r + "submap", 20, [this](const ros::SingleSubscriberPublisher&) { onRelayConnected(); });
+          r + "submap", 20, [this](const ros::SingleSubscriberPublisher& p) { onRelayConnected(p.getSubscriberName()); });
       heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>(r + "heartbeat", 5);
       const std::string mine = r + robot_ + "/";  // R's topics for this robot
       ack_sub_ = nh.subscribe(mine + "submap_ack", 100, &AgentNodelet::onAck, this);
@@ -484,9 +485,11 @@ class AgentNodelet : public nodelet::Nodelet {
     for (auto& [origin, out] : relay_out_) flushAcks(out);
   }
 
-  /// Origin: the relay robot connected to our submaps (started, or back):
-  /// everything unacknowledged is offered again.
-  void onRelayConnected() {
+  /// Origin: the relay robot (a node in its namespace, as agent.launch runs it;
+  /// not an observer) connected to our submaps (started, or back): everything
+  /// unacknowledged is offered again.
+  void onRelayConnected(const std::string& node) {
+    if (node.rfind("/" + relay_via_ + "/", 0) != 0) return;
     std::lock_guard<std::mutex> lock(mu_);
     NODELET_INFO("Agent %s: relay %s connected%s", robot_.c_str(), relay_via_.c_str(),
                  pipeline_ ? "; everything unacknowledged is offered again" : "");
