@@ -49,9 +49,11 @@
 #include "hermes/transport/mqtt_client.h"
 #include "hermes/transport/mqtt_messages.h"
 #include "mosquitto_broker.h"
+#include "rostest_support.h"
 
 namespace {
 
+using hermes_tests::nodePid;
 using Key = std::tuple<std::string, std::uint32_t, std::uint64_t>;
 const std::map<std::string, std::string> kSequence = {
     {"agent0", "MH_01_easy"}, {"agent1", "MH_02_easy"}, {"agent2", "MH_03_medium"}};
@@ -142,24 +144,6 @@ void observeMqtt(hermes::transport::MqttClient& client, Observed& o) {
       if (hb) o.name_of_uuid[hermes::toString(hb->agent)] = hb->name;
     }
   }
-}
-
-/// Process id of a node, asked through the master and the node's XML-RPC API; 0 if unknown.
-int nodePid(const std::string& node) {
-  XmlRpc::XmlRpcValue args, result, payload;
-  args[0] = ros::this_node::getName();
-  args[1] = node;
-  if (!ros::master::execute("lookupNode", args, result, payload, false)) return 0;
-  std::string host;
-  std::uint32_t port = 0;
-  if (!ros::network::splitURI(static_cast<std::string>(payload), host, port)) return 0;
-  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
-  XmlRpc::XmlRpcValue pid_args, pid_result;
-  pid_args[0] = ros::this_node::getName();
-  if (!client.execute("getPid", pid_args, pid_result) || pid_result.getType() != XmlRpc::XmlRpcValue::TypeArray ||
-      pid_result.size() < 3 || pid_result[2].getType() != XmlRpc::XmlRpcValue::TypeInt)
-    return 0;
-  return static_cast<int>(pid_result[2]);
 }
 
 hermes::Trajectory toTrajectory(const nav_msgs::Path& path) {
@@ -351,12 +335,7 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
   }
   for (const auto& [k, n] : o.accepted) EXPECT_TRUE(o.sent.count(k)) << "accepted a submap never sent";
   EXPECT_EQ(agents.size(), 3u);
-  const auto status = nlohmann::json::parse(o.status, nullptr, false);
-  ASSERT_TRUE(status.is_object()) << o.status;
-  EXPECT_EQ(status.value("agents_merged", 0), 3);
-  int applied = 0;
-  for (const auto& a : status["per_agent"]) applied += a.value("submaps_applied", 0);
-  EXPECT_EQ(applied, static_cast<int>(o.sent.size()));
+  hermes_tests::expectMergedAndApplied(o.status, 3, o.sent.size());
 
   // Each agent's published odometry (body poses) against its ground truth.
   for (const auto& [robot, seq] : kSequence) {

@@ -50,6 +50,26 @@
 // timer under the pipeline mutex, after the pipeline exists (acks kept by the
 // broker for a previous run wait for it). An unreachable broker is reported and
 // tried again with backoff; the spool keeps everything meanwhile.
+// Relay robots (ROS transport only; README "Relay robots on ROS"): ~relay_via R
+// sends this robot's submaps and heartbeats not to /hermes/* but to the relay
+// robot R's topics /R/relay/submap and /R/relay/heartbeat, and takes its
+// acknowledgements from R's topics for it (U = this robot): /R/relay/U/held (R
+// spooled the submap: the hop acknowledgement, UplinkSender::onHandedOver),
+// /R/relay/U/submap_ack (the server's, passed on; R keeps them while U does not
+// listen) and /R/relay/U/global_pose. Always through R, even when the server is
+// reachable (no fallback). When R connects (a node in R's namespace: R started
+// or came back) everything unacknowledged is offered again (R answers what the
+// server already acknowledged with that acknowledgement). ~relay_for "U1,U2"
+// makes this robot the relay of U1 and U2: it subscribes /<robot>/relay/submap
+// and .../heartbeat, spools the submaps per origin on disk (~relay_spool_dir,
+// default <spool_dir>.relay; RelayForwarder over RelaySpool), forwards them to
+// /hermes/submap paced by its coordinator (relay_split.h, relay.min_mbitps per
+// relayed robot, re-split every system.server_period_s, on its own uplink
+// estimate) and passes /hermes/submap_ack and /hermes/global_pose of its
+// origins on; a 50 ms wall timer forwards; when a subscriber of /hermes/submap
+// connects (the server started or came back) it sends everything held again.
+// A relay reaches the server itself (~relay_via and ~relay_for together are
+// refused: no chains).
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/GlobalPose.h>
@@ -64,6 +84,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -74,6 +95,7 @@
 
 #include "hermes/agent/agent_pipeline.h"
 #include "hermes/agent/camera_stream.h"
+#include "hermes/agent/relay_forwarder.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/core/frame_auth.h"
@@ -96,6 +118,14 @@ class AgentNodelet : public nodelet::Nodelet {
  private:
   using Status = hermes::Status;
   using CameraCalibration = hermes::CameraCalibration;
+
+  /// Relay: per relayed robot, its answer topics and the server acknowledgements
+  /// waiting for it to listen (the map is made in onInit, then only read).
+  struct RelayOut {
+    ros::Publisher held, ack, global;
+    std::vector<hermes_msgs::SubmapAck> waiting;  ///< under relay_out_mu_
+    int listening = 0;  ///< subscribers of `ack` in the robot's namespace (/U/..., as agent.launch runs it)
+  };
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
@@ -147,6 +177,7 @@ class AgentNodelet : public nodelet::Nodelet {
     pnh.param("timing_window", params_.threads.timing_window,
               params_.threads.timing_window > 0 ? params_.threads.timing_window : 3000);
     pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
+    if (!readRelayParams(pnh)) return;
     // Frame authentication: ~auth (launch default true) and ~key_file override
     // uplink.auth.*; the key is checked now, not at the first frame.
     pnh.param("auth", params_.uplink.auth.enabled, params_.uplink.auth.enabled);
@@ -176,6 +207,10 @@ class AgentNodelet : public nodelet::Nodelet {
       if (*dropped > 0)
         NODELET_WARN("Agent %s: clear_spool: dropped %zu unacknowledged submaps of a previous run",
                      robot_.c_str(), *dropped);
+      if (!relay_for_.empty()) {  // the relayed robots keep theirs and offer them again
+        std::error_code ec;
+        std::filesystem::remove_all(relay_spool_dir_, ec);
+      }
     }
     // The calibration: a dataset folder, a camera file, or later camera_info.
     if (!dataset.empty() && !camera.empty())
@@ -216,11 +251,21 @@ class AgentNodelet : public nodelet::Nodelet {
     uplink_status_pub_ = nh.advertise<std_msgs::String>("uplink_status", 20, true);
     if (mqtt_) {
       mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), &AgentNodelet::onMqtt, this);
+    } else if (!relay_via_.empty()) {  // everything through the relay robot's topics
+      const std::string r = "/" + relay_via_ + "/relay/";
+      submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>(
+          r + "submap", 20, [this](const ros::SingleSubscriberPublisher& p) { onRelayConnected(p.getSubscriberName()); });
+      heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>(r + "heartbeat", 5);
+      const std::string mine = r + robot_ + "/";  // R's topics for this robot
+      ack_sub_ = nh.subscribe(mine + "submap_ack", 100, &AgentNodelet::onAck, this);
+      held_sub_ = nh.subscribe(mine + "held", 100, &AgentNodelet::onHeld, this);
+      global_sub_ = nh.subscribe(mine + "global_pose", 20, &AgentNodelet::onGlobalPose, this);
     } else {
-      submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
+      if (relay_for_.empty()) submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>("/hermes/submap", 20);
       heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
       ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
       global_sub_ = nh.subscribe("/hermes/global_pose", 20, &AgentNodelet::onGlobalPose, this);
+      if (!relay_for_.empty() && !startRelay(nh, *config)) return;
     }
     done_sub_ = nh.subscribe("done", 1, &AgentNodelet::onDone, this);
     if (calibration_) {
@@ -278,6 +323,186 @@ class AgentNodelet : public nodelet::Nodelet {
       NODELET_INFO("Agent %s: uplink over MQTT, broker %s, client id %s", robot_.c_str(),
                    mqtt_->client().broker().c_str(), mqtt_->client().clientId().c_str());
     return true;
+  }
+
+  /// ~relay_via / ~relay_for / ~relay_spool_dir, checked (ROS transport only, no chains).
+  bool readRelayParams(ros::NodeHandle& pnh) {
+    std::string relay_for;
+    pnh.param("relay_via", relay_via_, relay_via_);
+    pnh.param("relay_for", relay_for, relay_for);
+    pnh.param("relay_spool_dir", relay_spool_dir_, params_.uplink.buffer.dir + ".relay");
+    auto origins = hermes::agent::parseRobotList(relay_for);
+    Status ok = origins.ok() ? Status::Ok() : Status(hermes::Error{"~relay_for: " + origins.error()});
+    if (ok && !relay_via_.empty())
+      if (Status s = hermes::agent::checkRobotName(relay_via_); !s) ok = hermes::Error{"~relay_via: " + s.error()};
+    const bool relays = ok && !origins->empty();
+    if (ok && !relay_via_.empty() && relays)
+      ok = hermes::Error{"~relay_via and ~relay_for together: a relay reaches the server itself (no relay chains)"};
+    if (ok && (relay_via_ == robot_ || (relays && std::count(origins->begin(), origins->end(), robot_))))
+      ok = hermes::Error{"a robot cannot relay for itself"};
+    if (ok && mqtt_ && (!relay_via_.empty() || relays))
+      ok = hermes::Error{"relaying runs over ROS topics: ~relay_via / ~relay_for need ~transport ros"};
+    if (!ok) {
+      NODELET_FATAL("Agent %s: %s", robot_.c_str(), ok.error().c_str());
+      return false;
+    }
+    relay_for_ = *origins;
+    return true;
+  }
+
+  /// ~relay_for: the spool per origin, the forwarder and the relay's topics.
+  bool startRelay(ros::NodeHandle& nh, const hermes::Config& config) {
+    hermes::agent::RelayParams rp;
+    double period = 0.5;  // system.server_period_s: the coordinator re-splits this often
+    Status s = rp.read(config);
+    if (s) s = config.get("system.server_period_s", &period);
+    if (!s) {
+      NODELET_FATAL("Agent %s: config: %s", robot_.c_str(), s.error().c_str());
+      return false;
+    }
+    auto f = hermes::agent::RelayForwarder::open(
+        relay_spool_dir_, relay_for_, rp, params_.uplink, period,
+        [this](const std::string& origin, std::uint32_t session, std::uint64_t seq,
+               const std::vector<std::uint8_t>& frame) {  // the origin's frame, untouched (its tag)
+          publishSubmap(hermes::toString(hermes::agentUuid(origin)), session, seq, frame);
+        });
+    if (!f) {
+      NODELET_FATAL("Agent %s: relay: %s", robot_.c_str(), f.error().c_str());
+      return false;
+    }
+    relay_ = std::move(*f);
+    relay_initial_Bps_ = params_.uplink.monitor.initial_bps;
+    // The server subscribed (started, or back): what the relay holds goes at once.
+    submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>(
+        "/hermes/submap", 20, [this](const ros::SingleSubscriberPublisher&) { relay_->onReconnect(); });
+    const std::string r = "/" + robot_ + "/relay/";
+    for (const std::string& o : relay_for_) {  // per relayed robot: its answers
+      RelayOut& out = relay_out_[o];
+      out.held = nh.advertise<hermes_msgs::SubmapAck>(r + o + "/held", 100);
+      out.ack = nh.advertise<hermes_msgs::SubmapAck>(
+          r + o + "/submap_ack", 100,
+          [this, o](const ros::SingleSubscriberPublisher& p) { onAckListener(o, p.getSubscriberName(), +1); },
+          [this, o](const ros::SingleSubscriberPublisher& p) { onAckListener(o, p.getSubscriberName(), -1); });
+      out.global = nh.advertise<hermes_msgs::GlobalPose>(r + o + "/global_pose", 20);
+    }
+    relay_submap_sub_ = nh.subscribe(r + "submap", 100, &AgentNodelet::onRelaySubmap, this);
+    relay_heartbeat_sub_ = nh.subscribe(r + "heartbeat", 20, &AgentNodelet::onRelayHeartbeat, this);
+    relay_timer_ = nh.createWallTimer(ros::WallDuration(0.05), &AgentNodelet::onRelayTimer, this);
+    std::string names;
+    for (const std::string& o : relay_->origins()) names += (names.empty() ? "" : ", ") + o;
+    NODELET_INFO("Agent %s: relay for %s: %ssubmap in, spool %s, %.1f Mbit/s guaranteed each", robot_.c_str(),
+                 names.c_str(), r.c_str(), relay_spool_dir_.c_str(), rp.min_mbitps);
+    return true;
+  }
+
+  /// A frame on submap_pub_: /hermes/submap, or the relay's topic with ~relay_via.
+  void publishSubmap(const std::string& uuid, std::uint32_t session, std::uint64_t seq,
+                     const std::vector<std::uint8_t>& frame) {
+    hermes_msgs::EncodedSubmap m;
+    m.header.stamp = ros::Time::now();
+    m.agent_uuid = uuid;
+    m.session = session;
+    m.seq = seq;
+    m.data = frame;
+    submap_pub_.publish(m);
+  }
+
+  /// Relay: a submap of a relayed robot arrived; spooled, then the hop is acknowledged.
+  void onRelaySubmap(const hermes_msgs::EncodedSubmapConstPtr& m) {
+    const std::string origin = relay_->originOfUuid(m->agent_uuid);
+    if (origin.empty()) {
+      NODELET_WARN_THROTTLE(5.0, "Agent %s: relay: a submap of agent %s, not a robot of ~relay_for: dropped",
+                            robot_.c_str(), m->agent_uuid.c_str());
+      return;
+    }
+    auto offer = relay_->offer(origin, m->session, m->seq, m->data, ros::WallTime::now().toSec());
+    if (!offer) {  // not acknowledged: the origin keeps it and offers it again
+      NODELET_WARN_THROTTLE(2.0, "Agent %s: %s", robot_.c_str(), offer.error().c_str());
+      return;
+    }
+    hermes_msgs::SubmapAck a;
+    a.header.stamp = ros::Time::now();
+    a.agent_uuid = m->agent_uuid;
+    a.session = m->session;
+    a.seq = m->seq;
+    if (*offer != hermes::agent::RelaySpool::Offer::kAlreadyAcked) {
+      a.status = hermes_msgs::SubmapAck::ACCEPTED;  // lost if the origin is not connected: it offers again
+      relay_out_.at(origin).held.publish(a);
+      return;
+    }
+    a.status = hermes_msgs::SubmapAck::DUPLICATE;  // the server's acknowledgement, again
+    a.reason_code = hermes_msgs::SubmapAck::REASON_REPLAY;
+    a.reason = "acknowledged by the server through relay " + robot_;
+    passAck(origin, a);
+  }
+
+  /// Relay: the server's acknowledgement goes to `origin` when it listens, else it
+  /// waits (a handed-over submap is not offered again before the relay reconnects,
+  /// so a lost one would stay in the origin's spool).
+  void passAck(const std::string& origin, const hermes_msgs::SubmapAck& a) {
+    auto it = relay_out_.find(origin);
+    if (it == relay_out_.end()) return;  // an earlier run's origin: nobody to tell
+    std::lock_guard<std::mutex> lock(relay_out_mu_);
+    it->second.waiting.push_back(a);
+    flushAcks(it->second);
+  }
+
+  /// A node subscribed to / left `origin`'s submap_ack: the origin itself when
+  /// it runs in the origin's namespace (an observer such as rostopic echo does not count).
+  void onAckListener(const std::string& origin, const std::string& node, int change) {
+    if (node.rfind("/" + origin + "/", 0) != 0) return;
+    std::lock_guard<std::mutex> lock(relay_out_mu_);
+    RelayOut& out = relay_out_.at(origin);
+    out.listening = std::max(0, out.listening + change);
+    flushAcks(out);
+  }
+
+  /// Publishes the waiting acknowledgements of one origin if it listens (relay_out_mu_ held).
+  void flushAcks(RelayOut& out) {
+    if (out.listening == 0) return;
+    for (const hermes_msgs::SubmapAck& a : out.waiting) out.ack.publish(a);
+    out.waiting.clear();
+  }
+
+  /// Relay: a relayed robot's heartbeat goes on to the server (its name there).
+  void onRelayHeartbeat(const hermes_msgs::AgentHeartbeatConstPtr& h) {
+    if (!relay_->originOfUuid(h->agent_uuid).empty()) heartbeat_pub_.publish(h);
+  }
+
+  /// Relay: forwards what the coordinator's pace allows on the relay's uplink estimate.
+  void onRelayTimer(const ros::WallTimerEvent&) {
+    const double now = ros::WallTime::now().toSec();
+    double uplink_Bps = relay_initial_Bps_;  // before the relay's own first submap
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (pipeline_)
+        uplink_Bps = pipeline_->withUplink([now](const hermes::agent::UplinkSender* up) {
+          return up ? up->monitor().estimate(now) : 0.0;
+        });
+    }
+    relay_->poll(now, uplink_Bps);  // never under mu_: the uplink thread calls the relay under its lock
+    std::lock_guard<std::mutex> lock(relay_out_mu_);
+    for (auto& [origin, out] : relay_out_) flushAcks(out);
+  }
+
+  /// Origin: the relay robot (a node in its namespace, as agent.launch runs it;
+  /// not an observer) connected to our submaps (started, or back): everything
+  /// unacknowledged is offered again.
+  void onRelayConnected(const std::string& node) {
+    if (node.rfind("/" + relay_via_ + "/", 0) != 0) return;
+    std::lock_guard<std::mutex> lock(mu_);
+    NODELET_INFO("Agent %s: relay %s connected%s", robot_.c_str(), relay_via_.c_str(),
+                 pipeline_ ? "; everything unacknowledged is offered again" : "");
+    if (pipeline_) pipeline_->onUplinkReconnect();
+  }
+
+  /// Origin: the relay holds our submap durably (hop acknowledgement).
+  void onHeld(const hermes_msgs::SubmapAckConstPtr& a) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!pipeline_ || a->agent_uuid != uuid_) return;
+    ++hop_acks_;
+    if (Status s = pipeline_->onHandedOver(a->session, a->seq, ros::WallTime::now().toSec()); !s)
+      NODELET_WARN_THROTTLE(2.0, "Agent %s: %s", robot_.c_str(), s.error().c_str());
   }
 
   /// MQTT: acknowledgements, reconnections and problems since the last tick.
@@ -419,13 +644,9 @@ class AgentNodelet : public nodelet::Nodelet {
                                 static_cast<unsigned long>(seq), sent.error().c_str());
         return;
       }
-      hermes_msgs::EncodedSubmap m;
-      m.header.stamp = ros::Time::now();
-      m.agent_uuid = uuid_;
-      m.session = session;
-      m.seq = seq;
-      m.data = frame;
-      submap_pub_.publish(m);
+      if (relay_)  // the relay's own stream: its credibility evidence (relay lock after the uplink's)
+        relay_->onOwnFrame(session, seq, frame, ros::WallTime::now().toSec());
+      publishSubmap(uuid_, session, seq, frame);
     });
     if (!s) {
       NODELET_FATAL("Agent %s: %s", robot_.c_str(), s.error().c_str());
@@ -494,6 +715,11 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   void onGlobalPose(const hermes_msgs::GlobalPoseConstPtr& m) {
+    if (const std::string origin = relay_ ? relay_->originOfUuid(m->agent_uuid) : std::string();
+        !origin.empty()) {  // a relayed robot's (never this robot's own): passed on
+      if (auto it = relay_out_.find(origin); it != relay_out_.end()) it->second.global.publish(m);
+      return;
+    }
     std::lock_guard<std::mutex> lock(mu_);
     if (!pipeline_ || m->agent_uuid != uuid_) return;
     hermes::GlobalPoseUpdate u;
@@ -520,6 +746,13 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   void onAck(const hermes_msgs::SubmapAckConstPtr& a) {
+    if (const std::string origin = relay_ ? relay_->originOfUuid(a->agent_uuid) : std::string();
+        !origin.empty()) {  // a relayed robot's (never this robot's own): freed here unless refused, passed on
+      if (a->status != hermes_msgs::SubmapAck::REJECTED)
+        relay_->onServerAck(origin, a->session, a->seq, ros::WallTime::now().toSec());
+      passAck(origin, *a);
+      return;
+    }
     std::lock_guard<std::mutex> lock(mu_);
     if (!pipeline_ || a->agent_uuid != uuid_) return;
     handleAck(a->status == hermes_msgs::SubmapAck::REJECTED,
@@ -660,6 +893,22 @@ class AgentNodelet : public nodelet::Nodelet {
     j["timings_ms"] = timings;
     j["done"] = done_;
     j["transport"] = mqtt_ ? "mqtt" : "ros";
+    if (!relay_via_.empty()) {
+      j["relay_via"] = relay_via_;
+      j["hop_acks"] = hop_acks_;
+      j["handed_over"] = pipeline_->withUplink(
+          [](const hermes::agent::UplinkSender* up) { return up ? up->handedOverCount() : 0; });
+    }
+    if (relay_) {  // per relayed robot
+      nlohmann::json r = nlohmann::json::object();
+      for (const hermes::agent::RelayForwarder::OriginState& o : relay_->states())
+        r[o.origin] = {{"stored", o.stats.stored}, {"duplicates", o.stats.duplicates},
+                       {"server_acked", o.stats.server_acked}, {"pending", o.pending},
+                       {"pending_bytes", o.pending_bytes}, {"waiting", o.waiting},
+                       {"forwarded", o.forwarded}, {"forwarded_bytes", o.forwarded_bytes},
+                       {"rate_kBps", o.rate_Bps / 1000.0}, {"weight", o.weight}};
+      j["relay_for"] = r;
+    }
     if (mqtt_) {
       const hermes::transport::MqttClientStats m = mqtt_->client().stats();
       j["mqtt"] = {{"broker", mqtt_->client().broker()}, {"connected", mqtt_->client().connected()},
@@ -690,6 +939,14 @@ class AgentNodelet : public nodelet::Nodelet {
   /// Set: transport mqtt. Declared before the pipeline, whose uplink thread uses it
   /// until the pipeline is gone.
   std::unique_ptr<hermes::transport::MqttAgentLink> mqtt_;
+  // Relaying (ROS transport). relay_via_: this robot's relay; relay_: this robot
+  // relays relay_for_ (thread-safe itself; taken after mu_ or the uplink lock,
+  // never before). Declared before the pipeline, whose uplink thread uses it.
+  std::string relay_via_, relay_spool_dir_;
+  std::vector<std::string> relay_for_;
+  std::unique_ptr<hermes::agent::RelayForwarder> relay_;
+  double relay_initial_Bps_ = 0;
+  std::size_t hop_acks_ = 0;  ///< hop acknowledgements of the relay (relay_via_)
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
   std::int64_t received_a_ = 0, received_b_ = 0, no_camera_ = 0, malformed_ = 0;
   std::int64_t tracked_ = 0, feed_errors_ = 0;
@@ -701,6 +958,10 @@ class AgentNodelet : public nodelet::Nodelet {
   ros::Subscriber ack_sub_, done_sub_, info_a_sub_, info_b_sub_, image_a_sub_, image_b_sub_;
   tf2_ros::TransformBroadcaster tf_;
   ros::WallTimer timer_, mqtt_timer_;
+  std::map<std::string, RelayOut> relay_out_;  ///< relay: per relayed robot
+  std::mutex relay_out_mu_;
+  ros::Subscriber relay_submap_sub_, relay_heartbeat_sub_, held_sub_;
+  ros::WallTimer relay_timer_;  ///< last: stopped first
   double last_heartbeat_ = 0;
   double last_retry_ = 0;  ///< wall time of the last retry of a carried window
 };

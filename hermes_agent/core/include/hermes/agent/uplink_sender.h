@@ -72,6 +72,7 @@ class UplinkSender {
   void onReconnect();
 
   BandwidthMonitor& monitor() { return monitor_; }
+  const BandwidthMonitor& monitor() const { return monitor_; }
   const MapBuffer& buffer() const { return buffer_; }
   MapBuffer& buffer() { return buffer_; }
   const UplinkStats& stats() const { return stats_; }
