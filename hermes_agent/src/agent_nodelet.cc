@@ -60,14 +60,11 @@
 // reachable (no fallback). When R connects (a node in R's namespace: R started
 // or came back) everything unacknowledged is offered again (R answers what the
 // server already acknowledged with that acknowledgement). ~relay_for "U1,U2"
-// makes this robot the relay of U1 and U2: it subscribes /<robot>/relay/submap
-// and .../heartbeat, spools the submaps per origin on disk (~relay_spool_dir,
-// default <spool_dir>.relay; RelayForwarder over RelaySpool), forwards them to
-// /hermes/submap paced by its coordinator (relay_split.h, relay.min_mbitps per
-// relayed robot, re-split every system.server_period_s, on its own uplink
-// estimate) and passes /hermes/submap_ack and /hermes/global_pose of its
-// origins on; a 50 ms wall timer forwards; when a subscriber of /hermes/submap
-// connects (the server started or came back) it sends everything held again.
+// makes this robot the relay of U1 and U2 (ros_relay.h: spool per origin on
+// disk, ~relay_spool_dir, default <spool_dir>.relay; paced forwarding to
+// /hermes/submap; acknowledgements and global poses passed on); when a
+// subscriber of /hermes/submap connects (the server started or came back) it
+// sends everything held again.
 // A relay reaches the server itself (~relay_via and ~relay_for together are
 // refused: no chains).
 #include <hermes_msgs/AgentHeartbeat.h>
@@ -95,12 +92,12 @@
 
 #include "hermes/agent/agent_pipeline.h"
 #include "hermes/agent/camera_stream.h"
-#include "hermes/agent/relay_forwarder.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/core/frame_auth.h"
 #include "hermes/transport/mqtt_links.h"
 #include "ros_convert.h"
+#include "ros_relay.h"
 
 namespace hermes_agent {
 namespace {
@@ -119,13 +116,9 @@ class AgentNodelet : public nodelet::Nodelet {
   using Status = hermes::Status;
   using CameraCalibration = hermes::CameraCalibration;
 
-  /// Relay: per relayed robot, its answer topics and the server acknowledgements
-  /// waiting for it to listen (the map is made in onInit, then only read).
-  struct RelayOut {
-    ros::Publisher held, ack, global;
-    std::vector<hermes_msgs::SubmapAck> waiting;  ///< under relay_out_mu_
-    int listening = 0;  ///< subscribers of `ack` in the robot's namespace (/U/..., as agent.launch runs it)
-  };
+  ~AgentNodelet() override {
+    if (relay_) relay_->stop();  // its timer reads the pipeline, destroyed before it
+  }
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
@@ -350,48 +343,28 @@ class AgentNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  /// ~relay_for: the spool per origin, the forwarder and the relay's topics.
+  /// ~relay_for: the spool per origin, /hermes/submap (the server subscribing
+  /// makes the relay send all it holds), the relay's topics (ros_relay.h).
   bool startRelay(ros::NodeHandle& nh, const hermes::Config& config) {
-    hermes::agent::RelayParams rp;
-    double period = 0.5;  // system.server_period_s: the coordinator re-splits this often
-    Status s = rp.read(config);
-    if (s) s = config.get("system.server_period_s", &period);
-    if (!s) {
-      NODELET_FATAL("Agent %s: config: %s", robot_.c_str(), s.error().c_str());
+    auto relay = RosRelay::open(
+        robot_, relay_for_, relay_spool_dir_, params_.uplink, config,
+        [this](const std::string& uuid, std::uint32_t session, std::uint64_t seq,
+               const std::vector<std::uint8_t>& frame) { publishSubmap(uuid, session, seq, frame); });
+    if (!relay) {
+      NODELET_FATAL("Agent %s: %s", robot_.c_str(), relay.error().c_str());
       return false;
     }
-    auto f = hermes::agent::RelayForwarder::open(
-        relay_spool_dir_, relay_for_, rp, params_.uplink, period,
-        [this](const std::string& origin, std::uint32_t session, std::uint64_t seq,
-               const std::vector<std::uint8_t>& frame) {  // the origin's frame, untouched (its tag)
-          publishSubmap(hermes::toString(hermes::agentUuid(origin)), session, seq, frame);
-        });
-    if (!f) {
-      NODELET_FATAL("Agent %s: relay: %s", robot_.c_str(), f.error().c_str());
-      return false;
-    }
-    relay_ = std::move(*f);
-    relay_initial_Bps_ = params_.uplink.monitor.initial_bps;
-    // The server subscribed (started, or back): what the relay holds goes at once.
+    relay_ = std::move(*relay);
     submap_pub_ = nh.advertise<hermes_msgs::EncodedSubmap>(
-        "/hermes/submap", 20, [this](const ros::SingleSubscriberPublisher&) { relay_->onReconnect(); });
-    const std::string r = "/" + robot_ + "/relay/";
-    for (const std::string& o : relay_for_) {  // per relayed robot: its answers
-      RelayOut& out = relay_out_[o];
-      out.held = nh.advertise<hermes_msgs::SubmapAck>(r + o + "/held", 100);
-      out.ack = nh.advertise<hermes_msgs::SubmapAck>(
-          r + o + "/submap_ack", 100,
-          [this, o](const ros::SingleSubscriberPublisher& p) { onAckListener(o, p.getSubscriberName(), +1); },
-          [this, o](const ros::SingleSubscriberPublisher& p) { onAckListener(o, p.getSubscriberName(), -1); });
-      out.global = nh.advertise<hermes_msgs::GlobalPose>(r + o + "/global_pose", 20);
-    }
-    relay_submap_sub_ = nh.subscribe(r + "submap", 100, &AgentNodelet::onRelaySubmap, this);
-    relay_heartbeat_sub_ = nh.subscribe(r + "heartbeat", 20, &AgentNodelet::onRelayHeartbeat, this);
-    relay_timer_ = nh.createWallTimer(ros::WallDuration(0.05), &AgentNodelet::onRelayTimer, this);
-    std::string names;
-    for (const std::string& o : relay_->origins()) names += (names.empty() ? "" : ", ") + o;
-    NODELET_INFO("Agent %s: relay for %s: %ssubmap in, spool %s, %.1f Mbit/s guaranteed each", robot_.c_str(),
-                 names.c_str(), r.c_str(), relay_spool_dir_.c_str(), rp.min_mbitps);
+        "/hermes/submap", 20, [this](const ros::SingleSubscriberPublisher&) { relay_->onServerSubscribed(); });
+    const double initial_Bps = params_.uplink.monitor.initial_bps;  // before the relay's own first submap
+    relay_->start(nh, heartbeat_pub_, [this, initial_Bps](double now) {
+      std::lock_guard<std::mutex> lock(mu_);  // released before the forwarder polls
+      if (!pipeline_) return initial_Bps;
+      return pipeline_->withUplink([now](const hermes::agent::UplinkSender* up) {
+        return up ? up->monitor().estimate(now) : 0.0;
+      });
+    });
     return true;
   }
 
@@ -405,84 +378,6 @@ class AgentNodelet : public nodelet::Nodelet {
     m.seq = seq;
     m.data = frame;
     submap_pub_.publish(m);
-  }
-
-  /// Relay: a submap of a relayed robot arrived; spooled, then the hop is acknowledged.
-  void onRelaySubmap(const hermes_msgs::EncodedSubmapConstPtr& m) {
-    const std::string origin = relay_->originOfUuid(m->agent_uuid);
-    if (origin.empty()) {
-      NODELET_WARN_THROTTLE(5.0, "Agent %s: relay: a submap of agent %s, not a robot of ~relay_for: dropped",
-                            robot_.c_str(), m->agent_uuid.c_str());
-      return;
-    }
-    auto offer = relay_->offer(origin, m->session, m->seq, m->data, ros::WallTime::now().toSec());
-    if (!offer) {  // not acknowledged: the origin keeps it and offers it again
-      NODELET_WARN_THROTTLE(2.0, "Agent %s: %s", robot_.c_str(), offer.error().c_str());
-      return;
-    }
-    hermes_msgs::SubmapAck a;
-    a.header.stamp = ros::Time::now();
-    a.agent_uuid = m->agent_uuid;
-    a.session = m->session;
-    a.seq = m->seq;
-    if (*offer != hermes::agent::RelaySpool::Offer::kAlreadyAcked) {
-      a.status = hermes_msgs::SubmapAck::ACCEPTED;  // lost if the origin is not connected: it offers again
-      relay_out_.at(origin).held.publish(a);
-      return;
-    }
-    a.status = hermes_msgs::SubmapAck::DUPLICATE;  // the server's acknowledgement, again
-    a.reason_code = hermes_msgs::SubmapAck::REASON_REPLAY;
-    a.reason = "acknowledged by the server through relay " + robot_;
-    passAck(origin, a);
-  }
-
-  /// Relay: the server's acknowledgement goes to `origin` when it listens, else it
-  /// waits (a handed-over submap is not offered again before the relay reconnects,
-  /// so a lost one would stay in the origin's spool).
-  void passAck(const std::string& origin, const hermes_msgs::SubmapAck& a) {
-    auto it = relay_out_.find(origin);
-    if (it == relay_out_.end()) return;  // an earlier run's origin: nobody to tell
-    std::lock_guard<std::mutex> lock(relay_out_mu_);
-    it->second.waiting.push_back(a);
-    flushAcks(it->second);
-  }
-
-  /// A node subscribed to / left `origin`'s submap_ack: the origin itself when
-  /// it runs in the origin's namespace (an observer such as rostopic echo does not count).
-  void onAckListener(const std::string& origin, const std::string& node, int change) {
-    if (node.rfind("/" + origin + "/", 0) != 0) return;
-    std::lock_guard<std::mutex> lock(relay_out_mu_);
-    RelayOut& out = relay_out_.at(origin);
-    out.listening = std::max(0, out.listening + change);
-    flushAcks(out);
-  }
-
-  /// Publishes the waiting acknowledgements of one origin if it listens (relay_out_mu_ held).
-  void flushAcks(RelayOut& out) {
-    if (out.listening == 0) return;
-    for (const hermes_msgs::SubmapAck& a : out.waiting) out.ack.publish(a);
-    out.waiting.clear();
-  }
-
-  /// Relay: a relayed robot's heartbeat goes on to the server (its name there).
-  void onRelayHeartbeat(const hermes_msgs::AgentHeartbeatConstPtr& h) {
-    if (!relay_->originOfUuid(h->agent_uuid).empty()) heartbeat_pub_.publish(h);
-  }
-
-  /// Relay: forwards what the coordinator's pace allows on the relay's uplink estimate.
-  void onRelayTimer(const ros::WallTimerEvent&) {
-    const double now = ros::WallTime::now().toSec();
-    double uplink_Bps = relay_initial_Bps_;  // before the relay's own first submap
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (pipeline_)
-        uplink_Bps = pipeline_->withUplink([now](const hermes::agent::UplinkSender* up) {
-          return up ? up->monitor().estimate(now) : 0.0;
-        });
-    }
-    relay_->poll(now, uplink_Bps);  // never under mu_: the uplink thread calls the relay under its lock
-    std::lock_guard<std::mutex> lock(relay_out_mu_);
-    for (auto& [origin, out] : relay_out_) flushAcks(out);
   }
 
   /// Origin: the relay robot (a node in its namespace, as agent.launch runs it;
@@ -645,7 +540,7 @@ class AgentNodelet : public nodelet::Nodelet {
         return;
       }
       if (relay_)  // the relay's own stream: its credibility evidence (relay lock after the uplink's)
-        relay_->onOwnFrame(session, seq, frame, ros::WallTime::now().toSec());
+        relay_->onOwnFrame(session, seq, frame);
       publishSubmap(uuid_, session, seq, frame);
     });
     if (!s) {
@@ -715,11 +610,7 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   void onGlobalPose(const hermes_msgs::GlobalPoseConstPtr& m) {
-    if (const std::string origin = relay_ ? relay_->originOfUuid(m->agent_uuid) : std::string();
-        !origin.empty()) {  // a relayed robot's (never this robot's own): passed on
-      if (auto it = relay_out_.find(origin); it != relay_out_.end()) it->second.global.publish(m);
-      return;
-    }
+    if (relay_ && relay_->takeGlobalPose(m)) return;  // a relayed robot's (never this robot's own)
     std::lock_guard<std::mutex> lock(mu_);
     if (!pipeline_ || m->agent_uuid != uuid_) return;
     hermes::GlobalPoseUpdate u;
@@ -746,13 +637,7 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   void onAck(const hermes_msgs::SubmapAckConstPtr& a) {
-    if (const std::string origin = relay_ ? relay_->originOfUuid(a->agent_uuid) : std::string();
-        !origin.empty()) {  // a relayed robot's (never this robot's own): freed here unless refused, passed on
-      if (a->status != hermes_msgs::SubmapAck::REJECTED)
-        relay_->onServerAck(origin, a->session, a->seq, ros::WallTime::now().toSec());
-      passAck(origin, *a);
-      return;
-    }
+    if (relay_ && relay_->takeAck(*a)) return;  // a relayed robot's (never this robot's own)
     std::lock_guard<std::mutex> lock(mu_);
     if (!pipeline_ || a->agent_uuid != uuid_) return;
     handleAck(a->status == hermes_msgs::SubmapAck::REJECTED,
@@ -899,16 +784,7 @@ class AgentNodelet : public nodelet::Nodelet {
       j["handed_over"] = pipeline_->withUplink(
           [](const hermes::agent::UplinkSender* up) { return up ? up->handedOverCount() : 0; });
     }
-    if (relay_) {  // per relayed robot
-      nlohmann::json r = nlohmann::json::object();
-      for (const hermes::agent::RelayForwarder::OriginState& o : relay_->states())
-        r[o.origin] = {{"stored", o.stats.stored}, {"duplicates", o.stats.duplicates},
-                       {"server_acked", o.stats.server_acked}, {"pending", o.pending},
-                       {"pending_bytes", o.pending_bytes}, {"waiting", o.waiting},
-                       {"forwarded", o.forwarded}, {"forwarded_bytes", o.forwarded_bytes},
-                       {"rate_kBps", o.rate_Bps / 1000.0}, {"weight", o.weight}};
-      j["relay_for"] = r;
-    }
+    if (relay_) j["relay_for"] = relay_->status();  // per relayed robot
     if (mqtt_) {
       const hermes::transport::MqttClientStats m = mqtt_->client().stats();
       j["mqtt"] = {{"broker", mqtt_->client().broker()}, {"connected", mqtt_->client().connected()},
@@ -944,8 +820,7 @@ class AgentNodelet : public nodelet::Nodelet {
   // never before). Declared before the pipeline, whose uplink thread uses it.
   std::string relay_via_, relay_spool_dir_;
   std::vector<std::string> relay_for_;
-  std::unique_ptr<hermes::agent::RelayForwarder> relay_;
-  double relay_initial_Bps_ = 0;
+  std::unique_ptr<RosRelay> relay_;
   std::size_t hop_acks_ = 0;  ///< hop acknowledgements of the relay (relay_via_)
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
   std::int64_t received_a_ = 0, received_b_ = 0, no_camera_ = 0, malformed_ = 0;
@@ -958,10 +833,7 @@ class AgentNodelet : public nodelet::Nodelet {
   ros::Subscriber ack_sub_, done_sub_, info_a_sub_, info_b_sub_, image_a_sub_, image_b_sub_;
   tf2_ros::TransformBroadcaster tf_;
   ros::WallTimer timer_, mqtt_timer_;
-  std::map<std::string, RelayOut> relay_out_;  ///< relay: per relayed robot
-  std::mutex relay_out_mu_;
-  ros::Subscriber relay_submap_sub_, relay_heartbeat_sub_, held_sub_;
-  ros::WallTimer relay_timer_;  ///< last: stopped first
+  ros::Subscriber held_sub_;
   double last_heartbeat_ = 0;
   double last_retry_ = 0;  ///< wall time of the last retry of a carried window
 };
