@@ -30,6 +30,9 @@ struct LoopClosureParams {
   double ransac_threshold_px = 2.0;   ///< inlier threshold, converted to angle with the focal length [px]
   int ransac_max_iterations = 3000;   ///< 17-point RANSAC iteration cap
   double ransac_probability = 0.99;   ///< stop when an all-inlier sample was drawn with this probability
+  /// Give up after this many 17-point iterations while no model has the inliers
+  /// the verdict needs (min_inliers, min_inlier_ratio); 0 = run to the cap.
+  int ransac_hopeless_iterations = 0;
   bool prefilter_pairs = true;        ///< central 5-point RANSAC per camera pair before the 17-point
   int prefilter_min_matches = 10;     ///< camera pairs with fewer matches are dropped by the pre-filter
   int prefilter_max_iterations = 300; ///< per camera pair
@@ -60,6 +63,10 @@ struct LoopClosureParams {
   /// baselines, repeated textures). Kept at 3 cm with inflation 16: 6 cm let loops
   /// 10-12 cm off through PCM (15-s bench: 1-2 per run, none at 3 cm).
   double max_translation_sigma_m = 0.03;
+  /// Before refining, reject a loop whose translation sigma at the RANSAC pose
+  /// (detail::translationSigmaBound: floor noise, 200 inliers) exceeds this
+  /// factor x max_translation_sigma_m; 0 = off (refine every RANSAC model).
+  double sigma_precheck_factor = 0.0;
   /// Focal length x stereo baseline [px m]: the refinement adds each keypoint's
   /// measured depth (stereo / RGB-D) as a residual fb * (1/z_pred - 1/z_obs) in
   /// disparity pixels, which fixes the metric translation a short rig baseline leaves
@@ -115,6 +122,7 @@ struct LoopClosureResult {
   int num_inliers = 0;
   int num_depth_inliers = 0;      ///< inliers with a measured depth in at least one view
   int ransac_iterations = 0;
+  int ransac_enough_at = -1;      ///< iteration whose model first had the inliers needed (-1 = none)
   double sigma_px = 0;            ///< pixel noise used for the information [px]
   std::vector<int> inliers;       ///< indices into the correspondences
   std::vector<RigMatch> inlier_matches;  ///< filled by LoopCloser::close
