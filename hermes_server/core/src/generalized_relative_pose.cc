@@ -250,25 +250,14 @@ LoopClosureResult solveGeneralizedRelativePose(const GeneralizedCorrespondences&
   opengv::transformation_t model = sac.model;
   std::vector<int> inliers = std::move(sac.inliers);
   const auto t_refine = Clock::now();
-  if (params.sigma_precheck_factor > 0 && static_cast<int>(inliers.size()) >= need) {
-    const double bound = detail::translationSigmaBound(corr, inliers, toSE3(model), params, kPrecheckPoints);
-    res.refine_ms = msSince(t_refine);
-    if (bound > params.sigma_precheck_factor * params.max_translation_sigma_m) {
-      res.num_inliers = static_cast<int>(inliers.size());
-      return finish(LoopStatus::kDegenerate,
-                    "translation poorly constrained before refinement (sigma >= " +
-                        std::to_string(bound) + " m at the RANSAC pose > " +
-                        std::to_string(params.sigma_precheck_factor) + " x " +
-                        std::to_string(params.max_translation_sigma_m) + " m)");
-    }
-  }
-
   if (params.refine && params.opengv_refine && static_cast<int>(inliers.size()) >= 18) {
     adapter.sett12(model.col(3));
     adapter.setR12(model.block<3, 3>(0, 0));
-    // On at most refine_max_points evenly spaced inliers (as the bundle adjustment).
+    // On at most opengv_refine_max_points (else refine_max_points, as the bundle
+    // adjustment) evenly spaced inliers.
     std::vector<int> subset = inliers;
-    const std::size_t cap = static_cast<std::size_t>(params.refine_max_points);
+    const std::size_t cap = static_cast<std::size_t>(
+        params.opengv_refine_max_points > 0 ? params.opengv_refine_max_points : params.refine_max_points);
     if (cap > 0 && inliers.size() > cap) {
       subset.resize(cap);
       for (std::size_t j = 0; j < cap; ++j) subset[j] = inliers[j * inliers.size() / cap];
@@ -287,6 +276,20 @@ LoopClosureResult solveGeneralizedRelativePose(const GeneralizedCorrespondences&
   if (static_cast<int>(inliers.size()) < need) {
     res.refine_ms = msSince(t_refine);
     return tooFew(LoopStatus::kTooFewInliers, static_cast<int>(inliers.size()), "RANSAC inliers");
+  }
+  // The bundle adjustment keeps a subset of these inliers at a noise of at
+  // least the floor: a sigma already far above the limit here stays above it.
+  if (params.sigma_precheck_factor > 0) {
+    const double bound = detail::translationSigmaBound(corr, inliers, toSE3(model), params, kPrecheckPoints);
+    res.refine_ms = msSince(t_refine);
+    if (bound > params.sigma_precheck_factor * params.max_translation_sigma_m) {
+      res.num_inliers = static_cast<int>(inliers.size());
+      return finish(LoopStatus::kDegenerate,
+                    "translation poorly constrained before the bundle adjustment (sigma >= " +
+                        std::to_string(bound) + " m > " +
+                        std::to_string(params.sigma_precheck_factor) + " x " +
+                        std::to_string(params.max_translation_sigma_m) + " m)");
+    }
   }
   // Maximum-likelihood refinement (points + pose), re-selection of the inliers
   // by reprojection error (also enforces cheirality) and the edge information.

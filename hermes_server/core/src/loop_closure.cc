@@ -24,6 +24,7 @@ Status LoopClosureParams::read(const Config& config, const std::string& prefix) 
                    config.get(p + "refine", &refine),
                    config.get(p + "opengv_refine", &opengv_refine),
                    config.get(p + "refine_max_points", &refine_max_points),
+                   config.get(p + "opengv_refine_max_points", &opengv_refine_max_points),
                    config.get(p + "sigma_floor_px", &sigma_floor_px),
                    config.get(p + "covariance_inflation", &covariance_inflation),
                    config.get(p + "max_translation_sigma_m", &max_translation_sigma_m),
@@ -53,6 +54,7 @@ void LoopClosureParams::write(ConfigWriter* w, const std::string& prefix) const 
   w->set(p + "refine", refine);
   w->set(p + "opengv_refine", opengv_refine);
   w->set(p + "refine_max_points", refine_max_points);
+  w->set(p + "opengv_refine_max_points", opengv_refine_max_points);
   w->set(p + "sigma_floor_px", sigma_floor_px);
   w->set(p + "covariance_inflation", covariance_inflation);
   w->set(p + "max_translation_sigma_m", max_translation_sigma_m);
@@ -79,6 +81,8 @@ Status LoopClosureParams::validate() const {
   if (!(sigma_floor_px > 0)) return Error{"sigma_floor_px must be > 0"};
   if (refine_max_points != 0 && refine_max_points < 18)
     return Error{"refine_max_points must be 0 (all) or >= 18 (17-point solver)"};
+  if (opengv_refine_max_points != 0 && opengv_refine_max_points < 18)
+    return Error{"opengv_refine_max_points must be 0 (refine_max_points) or >= 18"};
   if (!(covariance_inflation > 0)) return Error{"covariance_inflation must be > 0"};
   if (!(max_translation_sigma_m > 0)) return Error{"max_translation_sigma_m must be > 0"};
   if (!(sigma_precheck_factor == 0 || sigma_precheck_factor >= 1))
