@@ -391,7 +391,8 @@ Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAt
   return writeFile(path, [&](std::ostream& o) {
     o.precision(9);
     o << "agent,keyframe,stamp,candidate_agent,candidate_keyframe,candidate_stamp,score,"
-         "normalized_score,island_size,source,status,reason,matches,inliers,gt_distance_m,gt_angle_deg\n";
+         "normalized_score,island_size,source,status,reason,matches,inliers,gt_distance_m,gt_angle_deg,"
+         "prefiltered,ransac_iterations,ransac_enough_at,ms,prefilter_ms,ransac_ms,refine_ms\n";
     auto where = [&](const KeyframeKey& k, const OfflineAgent** agent) -> double {
       *agent = agentOfRobot(run, k.agent);
       const server::StoredKeyframe* kf = run.server().map().keyframe(k);
@@ -402,7 +403,7 @@ Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAt
       const double qs = where(a.query, &qa);
       o << (qa ? qa->name : "?") << ',' << a.query.id << ',' << (qa ? qs - qa->clock_offset : qs);
       if (!a.candidate) {
-        o << ",,,,,,,,no candidate,,,,,\n";
+        o << ",,,,,,,,no candidate,,,,,,,,,,,,\n";
         continue;
       }
       const OfflineAgent* ca = nullptr;
@@ -420,7 +421,8 @@ Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAt
       } else {
         o << ',';
       }
-      o << '\n';
+      o << ',' << a.prefiltered << ',' << a.ransac_iterations << ',' << a.ransac_enough_at << ','
+        << a.ms << ',' << a.prefilter_ms << ',' << a.ransac_ms << ',' << a.refine_ms << '\n';
     }
   });
 }

@@ -12,6 +12,7 @@ Status LoopClosureParams::read(const Config& config, const std::string& prefix) 
                    config.get(p + "ransac_threshold_px", &ransac_threshold_px),
                    config.get(p + "ransac_max_iterations", &ransac_max_iterations),
                    config.get(p + "ransac_probability", &ransac_probability),
+                   config.get(p + "ransac_hopeless_iterations", &ransac_hopeless_iterations),
                    config.get(p + "prefilter_pairs", &prefilter_pairs),
                    config.get(p + "prefilter_min_matches", &prefilter_min_matches),
                    config.get(p + "prefilter_max_iterations", &prefilter_max_iterations),
@@ -23,9 +24,11 @@ Status LoopClosureParams::read(const Config& config, const std::string& prefix) 
                    config.get(p + "refine", &refine),
                    config.get(p + "opengv_refine", &opengv_refine),
                    config.get(p + "refine_max_points", &refine_max_points),
+                   config.get(p + "opengv_refine_max_points", &opengv_refine_max_points),
                    config.get(p + "sigma_floor_px", &sigma_floor_px),
                    config.get(p + "covariance_inflation", &covariance_inflation),
                    config.get(p + "max_translation_sigma_m", &max_translation_sigma_m),
+                   config.get(p + "sigma_precheck_factor", &sigma_precheck_factor),
                    config.get(p + "depth_focal_baseline_px_m", &depth_focal_baseline_px_m),
                    config.get(p + "deterministic", &deterministic)}) {
     if (!s) return s;
@@ -40,6 +43,7 @@ void LoopClosureParams::write(ConfigWriter* w, const std::string& prefix) const 
   w->set(p + "ransac_threshold_px", ransac_threshold_px);
   w->set(p + "ransac_max_iterations", ransac_max_iterations);
   w->set(p + "ransac_probability", ransac_probability);
+  w->set(p + "ransac_hopeless_iterations", ransac_hopeless_iterations);
   w->set(p + "prefilter_pairs", prefilter_pairs);
   w->set(p + "prefilter_min_matches", prefilter_min_matches);
   w->set(p + "prefilter_max_iterations", prefilter_max_iterations);
@@ -50,9 +54,11 @@ void LoopClosureParams::write(ConfigWriter* w, const std::string& prefix) const 
   w->set(p + "refine", refine);
   w->set(p + "opengv_refine", opengv_refine);
   w->set(p + "refine_max_points", refine_max_points);
+  w->set(p + "opengv_refine_max_points", opengv_refine_max_points);
   w->set(p + "sigma_floor_px", sigma_floor_px);
   w->set(p + "covariance_inflation", covariance_inflation);
   w->set(p + "max_translation_sigma_m", max_translation_sigma_m);
+  w->set(p + "sigma_precheck_factor", sigma_precheck_factor);
   w->set(p + "depth_focal_baseline_px_m", depth_focal_baseline_px_m);
   w->set(p + "deterministic", deterministic);
 }
@@ -62,6 +68,7 @@ Status LoopClosureParams::validate() const {
   if (!(ransac_threshold_px > 0)) return Error{"ransac_threshold_px must be > 0"};
   if (ransac_max_iterations < 1) return Error{"ransac_max_iterations must be >= 1"};
   if (!(ransac_probability > 0 && ransac_probability < 1)) return Error{"ransac_probability must be in (0, 1)"};
+  if (ransac_hopeless_iterations < 0) return Error{"ransac_hopeless_iterations must be >= 0 (0 = off)"};
   if (prefilter_min_matches < 8) return Error{"prefilter_min_matches must be >= 8 (minimal samples up to 8)"};
   if (prefilter_max_iterations < 1) return Error{"prefilter_max_iterations must be >= 1"};
   if (prefilter_solver != "nister" && prefilter_solver != "stewenius" &&
@@ -74,8 +81,12 @@ Status LoopClosureParams::validate() const {
   if (!(sigma_floor_px > 0)) return Error{"sigma_floor_px must be > 0"};
   if (refine_max_points != 0 && refine_max_points < 18)
     return Error{"refine_max_points must be 0 (all) or >= 18 (17-point solver)"};
+  if (opengv_refine_max_points != 0 && opengv_refine_max_points < 18)
+    return Error{"opengv_refine_max_points must be 0 (refine_max_points) or >= 18"};
   if (!(covariance_inflation > 0)) return Error{"covariance_inflation must be > 0"};
   if (!(max_translation_sigma_m > 0)) return Error{"max_translation_sigma_m must be > 0"};
+  if (!(sigma_precheck_factor == 0 || sigma_precheck_factor >= 1))
+    return Error{"sigma_precheck_factor must be 0 (off) or >= 1"};
   if (!(depth_focal_baseline_px_m >= 0)) return Error{"depth_focal_baseline_px_m must be >= 0"};
   return Status::Ok();
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 
 #include <ceres/ceres.h>
@@ -209,13 +210,74 @@ SE3 refinePose(const std::vector<Terms>& terms, const std::vector<Vec3>& points,
   return T;
 }
 
+Terms makeTerms(const GeneralizedCorrespondences& corr, int i, double fb) {
+  const SE3& Tq = corr.T_refQ_Cq[corr.cam_q[i]];
+  const SE3& Tc = corr.T_refC_Cc[corr.cam_c[i]];
+  Terms c{InQuery<Pixel>(Tq, Pixel(corr.bearings_q[i], corr.focal_px)),
+          InCandidate<Pixel>(Tc, Pixel(corr.bearings_c[i], corr.focal_px)), std::nullopt, std::nullopt};
+  if (fb > 0 && corr.depthQ(i) > 0) c.dq.emplace(Tq, InverseDepth(corr.depthQ(i), fb));
+  if (fb > 0 && corr.depthC(i) > 0) c.dc.emplace(Tc, InverseDepth(corr.depthC(i), fb));
+  return c;
+}
+
+/// One point's contribution to the pose information (unit pixel noise): the
+/// Schur complement of the point in its 6+3 Gauss-Newton Hessian (numeric
+/// Jacobian). False when the point is not constrained in 3D.
+bool pointInformation(const Terms& c, const SE3& T, const Vec3& p, Mat6* info) {
+  const double h = 1e-6;
+  Eigen::Matrix<double, 6, 9> J;
+  for (int j = 0; j < 9; ++j) {
+    Vec6 xi = Vec6::Zero();
+    Vec3 dp = Vec3::Zero();
+    if (j < 6) xi(j) = h; else dp(j - 6) = h;
+    J.col(j) = (residuals(c, T * SE3::exp(xi), p + dp) - residuals(c, T * SE3::exp(-xi), p - dp)) / (2 * h);
+  }
+  const Eigen::Matrix<double, 6, 6> Jx = J.leftCols<6>();
+  const Eigen::Matrix<double, 6, 3> Jp = J.rightCols<3>();
+  const Mat3 Hpp = Jp.transpose() * Jp;
+  Eigen::SelfAdjointEigenSolver<Mat3> ep(Hpp);
+  if (!(ep.eigenvalues()(0) > 1e-9 * ep.eigenvalues()(2))) return false;
+  const Eigen::Matrix<double, 3, 6> Hpx = Jp.transpose() * Jx;
+  *info += Jx.transpose() * Jx - Hpx.transpose() * Hpp.inverse() * Hpx;
+  return true;
+}
+
+/// Largest translation standard deviation [m] of an information matrix
+/// (infinite when it is not positive definite).
+double translationSigma(const Mat6& info, Mat6* covariance = nullptr) {
+  Eigen::SelfAdjointEigenSolver<Mat6> eig(0.5 * (info + info.transpose()));
+  if (!(eig.eigenvalues().minCoeff() > 1e-9 * eig.eigenvalues().maxCoeff()) ||
+      !(eig.eigenvalues().minCoeff() > 0)) {
+    return std::numeric_limits<double>::infinity();
+  }
+  const Mat6 cov = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *
+                   eig.eigenvectors().transpose();
+  if (covariance) *covariance = cov;
+  Eigen::SelfAdjointEigenSolver<Mat3> et(cov.topLeftCorner<3, 3>());
+  return std::sqrt(std::max(0.0, et.eigenvalues().maxCoeff()));
+}
+
 }  // namespace
+
+double translationSigmaBound(const GeneralizedCorrespondences& corr, const std::vector<int>& inliers,
+                             const SE3& T, const LoopClosureParams& params, int max_points) {
+  const std::size_t n = inliers.size();
+  const std::size_t m = std::min<std::size_t>(n, static_cast<std::size_t>(std::max(1, max_points)));
+  Mat6 info = Mat6::Zero();
+  for (std::size_t j = 0; j < m; ++j) {
+    const int i = inliers[j * n / m];
+    Vec3 p;
+    if (triangulate(corr, i, T, &p)) pointInformation(makeTerms(corr, i, params.depth_focal_baseline_px_m), T, p, &info);
+  }
+  const double floor = params.sigma_floor_px;
+  info *= static_cast<double>(n) / m / (floor * floor * params.covariance_inflation);
+  return translationSigma(info);
+}
 
 Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
                                  const std::vector<int>& inliers, const SE3& T0,
                                  const LoopClosureParams& params) {
   Refinement out;
-  const double f = corr.focal_px;
   std::vector<int> ids;
   std::vector<Vec3> points;
   for (int i : inliers) {
@@ -227,17 +289,8 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
   }
   Eigen::Vector4d q = T0.quat().coeffs();
   Vec3 t = T0.translation();
-  const double fb = params.depth_focal_baseline_px_m;
   std::vector<Terms> terms;
-  for (int i : ids) {
-    const SE3& Tq = corr.T_refQ_Cq[corr.cam_q[i]];
-    const SE3& Tc = corr.T_refC_Cc[corr.cam_c[i]];
-    Terms c{InQuery<Pixel>(Tq, Pixel(corr.bearings_q[i], f)),
-            InCandidate<Pixel>(Tc, Pixel(corr.bearings_c[i], f)), std::nullopt, std::nullopt};
-    if (fb > 0 && corr.depthQ(i) > 0) c.dq.emplace(Tq, InverseDepth(corr.depthQ(i), fb));
-    if (fb > 0 && corr.depthC(i) > 0) c.dc.emplace(Tc, InverseDepth(corr.depthC(i), fb));
-    terms.push_back(c);
-  }
+  for (int i : ids) terms.push_back(makeTerms(corr, i, params.depth_focal_baseline_px_m));
 
   // The bundle adjustment sees an evenly spaced subset of at most
   // refine_max_points inliers (its cost grows with the points; a rig pair
@@ -297,7 +350,6 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
   Mat6 info = Mat6::Zero();
   double sq_sum = 0;
   int num_residuals = 0;
-  const double h = 1e-6;
   for (std::size_t k = 0; k < ids.size(); ++k) {
     const Vec6 r = residuals(terms[k], T, points[k]);
     // A measured depth that disagrees makes the match an outlier (metric check).
@@ -306,21 +358,7 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
           std::abs(r(5)) < th)) {
       continue;
     }
-    Eigen::Matrix<double, 6, 9> J;
-    for (int j = 0; j < 9; ++j) {
-      Vec6 xi = Vec6::Zero();
-      Vec3 dp = Vec3::Zero();
-      if (j < 6) xi(j) = h; else dp(j - 6) = h;
-      J.col(j) = (residuals(terms[k], T * SE3::exp(xi), points[k] + dp) -
-                  residuals(terms[k], T * SE3::exp(-xi), points[k] - dp)) / (2 * h);
-    }
-    const Eigen::Matrix<double, 6, 6> Jx = J.leftCols<6>();
-    const Eigen::Matrix<double, 6, 3> Jp = J.rightCols<3>();
-    const Mat3 Hpp = Jp.transpose() * Jp;
-    Eigen::SelfAdjointEigenSolver<Mat3> ep(Hpp);
-    if (!(ep.eigenvalues()(0) > 1e-9 * ep.eigenvalues()(2))) continue;
-    const Eigen::Matrix<double, 3, 6> Hpx = Jp.transpose() * Jx;
-    info += Jx.transpose() * Jx - Hpx.transpose() * Hpp.inverse() * Hpx;
+    if (!pointInformation(terms[k], T, points[k], &info)) continue;
     sq_sum += r.squaredNorm();
     num_residuals += 4 + (terms[k].dq ? 1 : 0) + (terms[k].dc ? 1 : 0);
     out.inliers.push_back(ids[k]);
@@ -338,17 +376,12 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
   out.sigma_px = sigma;
   info /= sigma * sigma * params.covariance_inflation;
   info = 0.5 * (info + info.transpose()).eval();
-  Eigen::SelfAdjointEigenSolver<Mat6> eig(info);
-  if (!(eig.eigenvalues().minCoeff() > 1e-9 * eig.eigenvalues().maxCoeff()) ||
-      !(eig.eigenvalues().minCoeff() > 0)) {
+  const double sigma_t = translationSigma(info, &out.covariance);
+  if (!std::isfinite(sigma_t)) {
     out.reason = "information is rank deficient (degenerate rig geometry)";
     return out;
   }
   out.information = info;
-  out.covariance = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *
-                   eig.eigenvectors().transpose();
-  Eigen::SelfAdjointEigenSolver<Mat3> et(out.covariance.topLeftCorner<3, 3>());
-  const double sigma_t = std::sqrt(std::max(0.0, et.eigenvalues().maxCoeff()));
   if (sigma_t > params.max_translation_sigma_m) {
     out.reason = "translation poorly constrained (sigma " + std::to_string(sigma_t) + " m > " +
                  std::to_string(params.max_translation_sigma_m) + " m)";

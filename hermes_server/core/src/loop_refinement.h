@@ -31,6 +31,14 @@ Refinement refineGeneralizedPose(const GeneralizedCorrespondences& corr,
                                  const std::vector<int>& inliers, const SE3& T0,
                                  const LoopClosureParams& params);
 
+/// Largest translation sigma [m] of the loop at pose T with the inliers
+/// triangulated there (no refinement), at the floor pixel noise and from at most
+/// max_points evenly spaced inliers (information scaled to all): about a lower
+/// bound of what refineGeneralizedPose reports for these inliers (it keeps a
+/// subset, its noise is at least the floor), to reject a weak loop before it.
+double translationSigmaBound(const GeneralizedCorrespondences& corr, const std::vector<int>& inliers,
+                             const SE3& T, const LoopClosureParams& params, int max_points);
+
 }  // namespace detail
 }  // namespace server
 }  // namespace hermes

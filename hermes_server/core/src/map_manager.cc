@@ -279,7 +279,10 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
     const LoopClosureResult& r = results[next++];
     ++stats->loops_attempted;
     if (attempt_hook_)
-      attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, r.status, r.reason, r.num_matches, r.num_inliers});
+      attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, r.status, r.reason, r.num_matches,
+                                r.num_inliers, r.num_prefiltered, r.ransac_iterations,
+                                r.ransac_enough_at, r.time_ms, r.prefilter_ms, r.ransac_ms,
+                                r.refine_ms});
     std::optional<LoopEdge> e = loopEdge(j.query, j.candidate->key, r);
     if (!e) continue;
     ++stats->loops_geometric;

@@ -35,7 +35,8 @@ Trace run(const fixture::Fixture& fx, int threads) {
   server.mapManager().setAttemptHook([&](const LoopAttempt& a) {
     std::ostringstream s;
     s << describe(a.query) << " -> " << (a.candidate ? describe(a.candidate->key) : "none") << " "
-      << a.spatial << " " << toString(a.status) << " " << a.matches << " " << a.inliers;
+      << a.spatial << " " << toString(a.status) << " " << a.matches << " " << a.inliers << " "
+      << a.ransac_iterations << " " << a.reason;  // the give-up and pre-check (defaults on) too
     trace.attempts.push_back(s.str());
   });
   double now = 0;

@@ -30,9 +30,12 @@ struct LoopClosureParams {
   double ransac_threshold_px = 2.0;   ///< inlier threshold, converted to angle with the focal length [px]
   int ransac_max_iterations = 3000;   ///< 17-point RANSAC iteration cap
   double ransac_probability = 0.99;   ///< stop when an all-inlier sample was drawn with this probability
+  /// Give up after this many 17-point iterations while no model has the inliers
+  /// the verdict needs (min_inliers, min_inlier_ratio); 0 = run to the cap.
+  int ransac_hopeless_iterations = 300;
   bool prefilter_pairs = true;        ///< central 5-point RANSAC per camera pair before the 17-point
   int prefilter_min_matches = 10;     ///< camera pairs with fewer matches are dropped by the pre-filter
-  int prefilter_max_iterations = 300; ///< per camera pair
+  int prefilter_max_iterations = 100; ///< per camera pair
   std::string prefilter_solver = "nister";  ///< nister | stewenius | sevenpt | eightpt (OpenGV central)
   int min_matches = 30;               ///< fewer putative correspondences: fail without RANSAC
   int min_inliers = 25;               ///< final inliers required
@@ -45,6 +48,11 @@ struct LoopClosureParams {
   /// information use every inlier. A rig pair of the rendered hall holds ~1000
   /// inliers, where refining on all of them was 90 % of a server merge.
   int refine_max_points = 600;
+  /// The OpenGV refinement alone sees at most this many (evenly spaced; 0 =
+  /// refine_max_points): it only gives the bundle adjustment its start and
+  /// re-selects the inliers, and its numeric-difference Levenberg-Marquardt
+  /// costs as much as the bundle adjustment at 600 points.
+  int opengv_refine_max_points = 150;
   double sigma_floor_px = 0.5;        ///< floor on the bearing noise used for the information [px]
   /// Covariance multiplier. On rendered 90-s three-robot runs the loop error
   /// against ground truth was ~2x the largest translation sigma (median) with 1.0
@@ -60,6 +68,10 @@ struct LoopClosureParams {
   /// baselines, repeated textures). Kept at 3 cm with inflation 16: 6 cm let loops
   /// 10-12 cm off through PCM (15-s bench: 1-2 per run, none at 3 cm).
   double max_translation_sigma_m = 0.03;
+  /// Before the bundle adjustment, reject a loop whose translation sigma at the
+  /// OpenGV-refined pose (detail::translationSigmaBound: floor noise, 200
+  /// inliers) exceeds this factor x max_translation_sigma_m; 0 = off.
+  double sigma_precheck_factor = 2.0;
   /// Focal length x stereo baseline [px m]: the refinement adds each keypoint's
   /// measured depth (stereo / RGB-D) as a residual fb * (1/z_pred - 1/z_obs) in
   /// disparity pixels, which fixes the metric translation a short rig baseline leaves
@@ -115,6 +127,7 @@ struct LoopClosureResult {
   int num_inliers = 0;
   int num_depth_inliers = 0;      ///< inliers with a measured depth in at least one view
   int ransac_iterations = 0;
+  int ransac_enough_at = -1;      ///< iteration whose model first had the inliers needed (-1 = none)
   double sigma_px = 0;            ///< pixel noise used for the information [px]
   std::vector<int> inliers;       ///< indices into the correspondences
   std::vector<RigMatch> inlier_matches;  ///< filled by LoopCloser::close

@@ -105,6 +105,11 @@ struct LoopAttempt {
   LoopStatus status = LoopStatus::kBadInput;
   std::string reason;  ///< empty when accepted or without a candidate
   int matches = 0, inliers = 0;
+  int prefiltered = 0;          ///< matches left by the per-pair pre-filter
+  int ransac_iterations = 0;
+  int ransac_enough_at = -1;    ///< 17-point iteration that first had the inliers needed (-1 = none)
+  double ms = 0;                ///< matching + geometry [ms]
+  double prefilter_ms = 0, ransac_ms = 0, refine_ms = 0;  ///< parts of ms
 };
 
 class MapManager {
