@@ -9,6 +9,10 @@
 //   covisibility  hermes with covisibility keyframes instead of entropy (Fig. 14)
 //   false_candidates  hermes with 20 % of place-recognition candidates replaced by
 //                 random keyframes of other agents: PCM must keep every false loop out
+//   md_a, md_b    hermes with the paper's landmark scores MD_A (stability) and MD_B
+//                 (spatial ANMS) instead of the MILP (landmark-scoring ablation)
+// --full mh|v1: the whole-sequence table (bench_system_full.cc): five (three) robots
+// over their whole sequences, each run kept in its own folder, resumable.
 // Prints a table on stderr and JSON on stdout (or --json FILE).
 #include <algorithm>
 #include <chrono>
@@ -16,6 +20,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iostream>
 #include <memory>
@@ -29,6 +34,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hermes/core/render_cache.h"
+#include "hermes/system/bench_store.h"
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
@@ -42,13 +48,16 @@ const char* kUsage =
     "usage: hermes_bench_system [--duration S] [--rate HZ] [--cache DIR]\n"
     "                           [--bandwidths LIST] [--variants LIST] [--set KEY=VALUE]...\n"
     "                           [--json FILE]\n"
+    "       hermes_bench_system --swarm LIST [...]      (the swarm sweep)\n"
+    "       hermes_bench_system --full mh|v1 [--out DIR] [...]   (whole sequences)\n"
     "  --duration S     seconds rendered per robot (default 15)\n"
     "  --rate HZ        camera rate (default 20)\n"
     "  --cache DIR      rendered data cache (default data_cache/bench_system)\n"
     "  --bandwidths L   shared link rates in Mbit/s, 0 = unlimited (default 0,30,10,5,1,0.5)\n"
-    "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility,false_candidates\n"
-    "                   (default: all; the last three only at the two lowest bandwidths,\n"
-    "                   false_candidates only unlimited)\n"
+    "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility,false_candidates,\n"
+    "                   md_a,md_b (default: the first six; csa_off, covisibility,\n"
+    "                   md_a, md_b only at the two lowest bandwidths, false_candidates\n"
+    "                   only unlimited)\n"
     "  --set KEY=VALUE  configuration override for every run (repeatable; e.g.\n"
     "                   distill.k_max=300); the variant's own settings win\n"
     "  --swarm L        instead: swarm sizes (e.g. 2,5,10,15,20) sharing one\n"
@@ -61,6 +70,19 @@ const char* kUsage =
     "                   from ../shared/data/euroc_gt when a sequence is missing)\n"
     "  --swarm-sequences L  (default MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,\n"
     "                   MH_05_difficult)\n"
+    "  --full SET       instead: the whole-sequence table. SET mh: five robots over whole\n"
+    "                   MH_01-05 in one hall (data_cache/mh_full); v1: three over whole\n"
+    "                   V1_01-03 (data_cache/v1_full); rendered from ../shared/data/euroc_gt\n"
+    "                   when missing. Bandwidths default to 0,10,2,0.5, variants to\n"
+    "                   hermes,raw,fixed_k100 (ablations: csa_off, covisibility, md_a, md_b\n"
+    "                   run at every bandwidth given). Each run is kept in --out\n"
+    "                   (default results/bench_full_SET/<variant>_<Mbit/s>/: metrics,\n"
+    "                   trajectories, CSVs, bench_row.json); a run with a row there is\n"
+    "                   not run again, so an interrupted table resumes. Progress on\n"
+    "                   stderr every 30 s; plots (ATE and bytes vs bandwidth) in OUT/plots.\n"
+    "                   With --duration S, each robot flies only its first S seconds\n"
+    "                   (a quick check of the set-up).\n"
+    "  --out DIR        --full's store folder (see above)\n"
     "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
 
 std::vector<std::string> split(const std::string& s) {
@@ -80,6 +102,8 @@ std::vector<std::string> variantSets(const std::string& v) {
   if (v == "csa_off") return {"server.csa=off"};
   if (v == "covisibility") return {"keyframe.policy=covisibility"};
   if (v == "false_candidates") return {};
+  if (v == "md_a") return {"distill.strategy=stability"};
+  if (v == "md_b") return {"distill.strategy=anms"};
   return {"?"};
 }
 
@@ -161,7 +185,9 @@ Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::str
 
 /// One offline run of `variant` with all `robots` sharing a `bw` Mbit/s link.
 Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw, const Robots& robots,
-                                    const std::vector<std::string>& overrides) {
+                                    const std::vector<std::string>& overrides,
+                                    const std::function<void(const system::ProgressInfo&)>& progress,
+                                    const std::string& out_dir) {
   std::vector<std::string> sets = overrides;
   for (const std::string& s : variantSets(v)) sets.push_back(s);
   sets.push_back("link.bandwidth_mbitps=" + bw);
@@ -184,9 +210,11 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   std::size_t injected = 0;
   if (v == "false_candidates") injectFalseCandidates(**run, 0.2, &injected);
   const auto t0 = std::chrono::steady_clock::now();
-  if (Status s = (*run)->run(); !s) return Error{s.error()};
+  if (Status s = (*run)->run(progress); !s) return Error{s.error()};
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const system::RunResults r = system::evaluateRun(**run);
+  if (!out_dir.empty())
+    if (Status s = system::writeRunResults(**run, r, out_dir); !s) return Error{s.error()};
   nlohmann::json j = system::resultsJson(r);
   j["variant"] = v;
   j["agents"] = robots.size();
@@ -246,6 +274,120 @@ int writeJson(const nlohmann::json& out, const std::string& path) {
   return 0;
 }
 
+/// --full: the whole-sequence set `name` (mh | v1): render folder and sequences.
+Expected<std::pair<std::string, std::vector<std::string>>> fullSet(const std::string& name) {
+  const std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/";
+  if (name == "mh")
+    return std::make_pair(cache + "mh_full",
+                          split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult"));
+  if (name == "v1") return std::make_pair(cache + "v1_full", split("V1_01_easy,V1_02_medium,V1_03_difficult"));
+  return Error{"--full: unknown set '" + name + "' (mh or v1)"};
+}
+
+/// One row of the --full table: merged, ATE all and per robot (own odometry),
+/// bytes, kB/s, loops, lost rate, server time per submap, wall.
+void printFullRow(const std::string& v, const std::string& bw, const nlohmann::json& j, bool resumed) {
+  auto num = [&](const nlohmann::json& o, const char* k) {
+    return o.contains(k) && o[k].is_number() ? o[k].get<double>() : std::nan("");
+  };
+  std::string agents;
+  for (const nlohmann::json& a : j.value("per_agent", nlohmann::json::array())) {
+    char cell[48];
+    std::snprintf(cell, sizeof cell, " %5.2f(%5.2f)", num(a, "merged_ate_rmse_m") * 100, num(a, "raw_ate_rmse_m") * 100);
+    agents += cell;
+  }
+  const nlohmann::json la = j.value("loop_accuracy", nlohmann::json::object());
+  char loops[48];
+  std::snprintf(loops, sizeof loops, "%.0f/%.0f/%.0f", num(j, "loops_accepted"), num(j, "loops_rejected"),
+                num(la, "wrong"));
+  std::fprintf(stderr, "%-10s %6s %2.0f/%-2zu %6.2f %s %7.1f %5.0f/%-5.0f %15s %5.2f %6.0f/%-6.0f %6.0f%s\n",
+               v.c_str(), std::atof(bw.c_str()) <= 0 ? "unlim" : bw.c_str(), num(j, "agents_merged"),
+               j["agents"].get<std::size_t>(), num(j, "ate_rmse_m") * 100, agents.c_str(),
+               num(j, "bytes_total") / 1e6, num(j, "kBps_mean"), num(j, "kBps_peak"), loops,
+               num(j, "tracking_lost_rate_mean") * 100,
+               timing(j, "submap", "median"), timing(j, "submap", "p95"), num(j, "wall_s"),
+               resumed ? "  (kept from an earlier run)" : "");
+}
+
+/// --full: every (variant, bandwidth) over the whole sequences of `set`, each run
+/// stored as it finishes (BenchStore), then the table, the combined JSON and plots.
+int runFull(const std::string& set, std::vector<std::string> variants, std::vector<std::string> bandwidths,
+            bool variants_given, bool bandwidths_given, double rate, double first_s, std::string out,
+            const std::vector<std::string>& overrides, const std::string& json_out) {
+  auto data = fullSet(set);
+  if (!data.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", data.error().c_str()), 2;
+  if (!variants_given) variants = split("hermes,raw,fixed_k100");
+  if (!bandwidths_given) bandwidths = split("0,10,2,0.5");
+  if (out.empty()) out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set;
+  const auto& [dir, seqs] = *data;
+  if (Status s = system::ensureWholeRenders(dir, seqs, std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt", rate); !s)
+    return std::fprintf(stderr, "hermes_bench_system: %s\n", s.error().c_str()), 1;
+  Robots robots;
+  for (const std::string& seq : seqs) {
+    if (first_s <= 0) {
+      robots.push_back({seq, fs::path(dir) / seq});
+      continue;
+    }
+    const fs::path view = fs::path(out) / "views" / seq;  // --duration: the first S seconds
+    auto w = system::writeEurocWindow((fs::path(dir) / seq).string(), 0, first_s, view.string());
+    if (!w.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", w.error().c_str()), 1;
+    robots.push_back({seq, view});
+  }
+  const nlohmann::json setup = {{"bench", "system_full"}, {"set", set}, {"data", dir},
+                                {"sequences", seqs}, {"rate_hz", rate}, {"first_s", first_s},
+                                {"overrides", overrides}};
+  auto store = system::BenchStore::open(out, setup);
+  if (!store.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", store.error().c_str()), 2;
+  std::fprintf(stderr, "hermes_bench_system: --full %s: %zu robots, %zu runs, kept in %s\n", set.c_str(),
+               robots.size(), variants.size() * bandwidths.size(), out.c_str());
+  std::string header;
+  for (const std::string& seq : seqs) header += " " + seq.substr(0, 5) + "(odom)";
+  std::fprintf(stderr, "%-10s %6s %5s %6s%s %7s %11s %14s %5s %13s %6s\n", "variant", "Mbit/s", "merged", "ATE",
+               header.c_str(), "MB", "kB/s mn/pk", "loops a/r/wrong", "lost%", "srv ms med/p95", "wall");
+  nlohmann::json runs = nlohmann::json::array();
+  std::size_t index = 0;
+  const std::size_t total = variants.size() * bandwidths.size();
+  for (const std::string& v : variants)
+    for (const std::string& bw : bandwidths) {
+      ++index;
+      char name[64];
+      std::snprintf(name, sizeof name, "%s_%g", v.c_str(), std::atof(bw.c_str()));
+      if (auto row = store->find(name)) {
+        printFullRow(v, bw, *row, true);
+        runs.push_back(*row);
+        continue;
+      }
+      const auto t0 = std::chrono::steady_clock::now();
+      double last = 0;
+      auto progress = [&](const system::ProgressInfo& p) {
+        const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (wall - last < 30) return;
+        last = wall;
+        std::fprintf(stderr, "  [%zu/%zu %s] sim %6.1f/%.1f s%s  frames %zu/%zu  agents merged %d/%zu  wall %.0f s\n",
+                     index, total, name, p.sim_time, p.sim_end, p.draining ? " (delivering backlog)" : "",
+                     p.frames_done, p.frames_total, p.agents_merged, robots.size(), wall);
+      };
+      auto j = runVariant(v, bw, robots, overrides, progress, store->runDir(name));
+      if (!j.ok()) return std::fprintf(stderr, "hermes_bench_system: %s: %s\n", name, j.error().c_str()), 1;
+      (*j)["run"] = name;
+      if (Status s = store->save(name, *j); !s)
+        return std::fprintf(stderr, "hermes_bench_system: %s\n", s.error().c_str()), 1;
+      printFullRow(v, bw, *j, false);
+      runs.push_back(*j);
+    }
+  nlohmann::json all = setup;
+  all["runs"] = runs;
+  const std::string combined = (fs::path(out) / "bench_system_full.json").string();
+  if (writeJson(all, combined) != 0) return 1;
+  const std::string script = std::string(HERMES_SOURCE_DIR) + "/scripts/plot_bench_full.py";
+  const std::string cmd = "/usr/bin/python3 '" + script + "' --json '" + combined + "' --out '" +
+                          (fs::path(out) / "plots").string() + "' >/dev/null 2>&1";
+  if (std::system(cmd.c_str()) != 0)
+    std::fprintf(stderr, "hermes_bench_system: warning: plots failed (%s)\n", cmd.c_str());
+  std::fprintf(stderr, "hermes_bench_system: table in %s, plots in %s/plots\n", combined.c_str(), out.c_str());
+  return json_out.empty() ? 0 : writeJson(all, json_out);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -261,7 +403,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> swarm_seqs =
       split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult");
   std::vector<std::string> overrides;
-  bool variants_given = false;
+  std::string full, full_out;
+  bool variants_given = false, bandwidths_given = false, duration_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -276,12 +419,14 @@ int main(int argc, char** argv) {
       return 0;
     } else if (a == "--duration") {
       duration = std::atof(next().c_str());
+      duration_given = true;
     } else if (a == "--rate") {
       rate = std::atof(next().c_str());
     } else if (a == "--cache") {
       cache = next();
     } else if (a == "--bandwidths") {
       bandwidths = split(next());
+      bandwidths_given = true;
     } else if (a == "--variants") {
       variants = split(next());
       variants_given = true;
@@ -293,6 +438,10 @@ int main(int argc, char** argv) {
       swarm_data = next();
     } else if (a == "--swarm-sequences") {
       swarm_seqs = split(next());
+    } else if (a == "--full") {
+      full = next();
+    } else if (a == "--out") {
+      full_out = next();
     } else if (a == "--set") {
       overrides.push_back(next());
     } else if (a == "--json") {
@@ -312,6 +461,13 @@ int main(int argc, char** argv) {
       return 2;
     }
 
+  if (!full.empty() && !swarm.empty())
+    return std::fprintf(stderr, "hermes_bench_system: --full and --swarm are two different tables; give one\n"), 2;
+  if (!full_out.empty() && full.empty())
+    return std::fprintf(stderr, "hermes_bench_system: --out is --full's store folder; give --full too\n"), 2;
+  if (!full.empty())
+    return runFull(full, variants, bandwidths, variants_given, bandwidths_given, rate,
+                   duration_given ? duration : 0, full_out, overrides, json_out);
   if (!swarm.empty()) {
     if (!variants_given) variants = {"hermes", "raw"};
     for (const std::string& n : swarm)
@@ -329,7 +485,7 @@ int main(int argc, char** argv) {
       auto robots = swarmRobots(swarm_data, swarm_seqs, views, duration, rate, std::atoi(n.c_str()));
       if (!robots.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", robots.error().c_str()), 1;
       for (const std::string& v : variants) {
-        auto j = runVariant(v, swarm_bw, *robots, overrides);
+        auto j = runVariant(v, swarm_bw, *robots, overrides, nullptr, "");
         if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
         printSwarmRow(v, *j);
         runs.push_back(*j);
@@ -364,11 +520,11 @@ int main(int argc, char** argv) {
   std::fprintf(stderr, "%-13s %9s %7s %10s %9s %9s %7s %8s\n", "variant", "Mbit/s", "merged",
                "ATE [cm]", "kB", "kB/s", "loops", "wall [s]");
   for (const std::string& v : variants) {
-    const bool ablation = v == "csa_off" || v == "covisibility";  // low bandwidths only
+    const bool ablation = v == "csa_off" || v == "covisibility" || v == "md_a" || v == "md_b";  // low bandwidths only
     for (const std::string& bw : bandwidths) {
       if (ablation && std::find(low.begin(), low.end(), bw) == low.end()) continue;
       if (v == "false_candidates" && std::atof(bw.c_str()) > 0) continue;
-      auto j = runVariant(v, bw, robots, overrides);
+      auto j = runVariant(v, bw, robots, overrides, nullptr, "");
       if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
       printRow(v, bw, *j);
       runs.push_back(*j);
