@@ -71,15 +71,12 @@
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/GlobalPose.h>
 #include <hermes_msgs/SubmapAck.h>
-#include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <std_msgs/Empty.h>
 #include <std_msgs/String.h>
-#include <tf2_ros/transform_broadcaster.h>
 
-#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -96,8 +93,10 @@
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/core/frame_auth.h"
 #include "hermes/transport/mqtt_links.h"
+#include "odom_publisher.h"
 #include "ros_convert.h"
 #include "ros_relay.h"
+#include "uplink_status.h"
 
 namespace hermes_agent {
 namespace {
@@ -239,8 +238,7 @@ class AgentNodelet : public nodelet::Nodelet {
     topic_a_ = nh.resolveName(stereo ? "left/image" : "rgb/image");
     topic_b_ = nh.resolveName(stereo ? "right/image" : "depth/image");
 
-    odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 50);
-    odom_global_pub_ = nh.advertise<nav_msgs::Odometry>("odom_global", 50);
+    odom_.advertise(nh, robot_);
     uplink_status_pub_ = nh.advertise<std_msgs::String>("uplink_status", 20, true);
     if (mqtt_) {
       mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), &AgentNodelet::onMqtt, this);
@@ -568,45 +566,7 @@ class AgentNodelet : public nodelet::Nodelet {
     }
     if (r->status != hermes::TrackingStatus::kOk) return;
     ++tracked_;
-    const hermes::SE3 T_W_B = pipeline_->trajectory().back().T_W_B;
-    nav_msgs::Odometry odom;
-    odom.header.stamp = stamp;
-    odom.header.frame_id = robot_ + "/odom";
-    odom.child_frame_id = robot_ + "/base_link";
-    odom.pose.pose = toPose(T_W_B);
-    odom_pub_.publish(odom);
-    geometry_msgs::TransformStamped tf;
-    tf.header = odom.header;
-    tf.child_frame_id = odom.child_frame_id;
-    tf.transform.translation.x = odom.pose.pose.position.x;
-    tf.transform.translation.y = odom.pose.pose.position.y;
-    tf.transform.translation.z = odom.pose.pose.position.z;
-    tf.transform.rotation = odom.pose.pose.orientation;
-    tf_.sendTransform(tf);
-    publishGlobal(T_W_B, stamp);
-  }
-
-  /// odom_global and TF world -> <robot>/odom, once the server placed this robot.
-  void publishGlobal(const hermes::SE3& T_O_B, const ros::Time& stamp) {
-    const hermes::GlobalPoseState g = pipeline_->globalPose();
-    const auto T_world_B = g.inWorld(T_O_B);
-    if (!T_world_B) return;
-    nav_msgs::Odometry o;
-    o.header.stamp = stamp;
-    o.header.frame_id = "world";
-    o.child_frame_id = robot_ + "/base_link";
-    o.pose.pose = toPose(*T_world_B);
-    odom_global_pub_.publish(o);
-    geometry_msgs::TransformStamped tf;
-    tf.header.stamp = stamp;
-    tf.header.frame_id = "world";
-    tf.child_frame_id = robot_ + "/odom";
-    const geometry_msgs::Pose p = toPose(g.latest()->T_W_O);
-    tf.transform.translation.x = p.position.x;
-    tf.transform.translation.y = p.position.y;
-    tf.transform.translation.z = p.position.z;
-    tf.transform.rotation = p.orientation;
-    tf_.sendTransform(tf);
+    odom_.publish(pipeline_->trajectory().back().T_W_B, pipeline_->globalPose(), stamp);
   }
 
   void onGlobalPose(const hermes_msgs::GlobalPoseConstPtr& m) {
@@ -737,66 +697,20 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   void publishUplinkStatus() {
-    using Keys = std::vector<std::pair<std::uint32_t, std::uint64_t>>;
-    auto keys = [](const Keys& k) {
-      nlohmann::json a = nlohmann::json::array();
-      for (const auto& [session, seq] : k) a.push_back({session, seq});
-      return a;
-    };
-    const hermes::agent::WindowCounters w = pipeline_->windows();
-    nlohmann::json j;
-    j["robot"] = robot_;
-    j["uuid"] = uuid_;
-    j["pid"] = static_cast<std::int64_t>(::getpid());  // tells restarted processes apart
-    j["session"] = pipeline_->session();
-    j["created"] = keys(created_);
-    j["replayed"] = keys(replayed_);
-    j["windows"] = {{"total", w.windows}, {"submitted", w.sent}, {"deferred", w.deferred},
-                    {"failed", w.failed}, {"refused", w.refused},
-                    {"extended_keyframes", w.extended_keyframes}};
-    pipeline_->withUplink([&](const hermes::agent::UplinkSender* up) {  // the uplink thread shares it
-      j["pending"] = keys(up->buffer().pendingKeys());
-      j["sends"] = up->stats().sends;
-      j["resends"] = up->stats().resends;
-      j["acked"] = up->stats().acked;
-      j["spool_pending_bytes"] = up->buffer().pendingBytes();
-      j["spool_file_bytes"] = up->buffer().fileBytes();
-    });
-    j["spool_cap_bytes"] = static_cast<std::int64_t>(params_.uplink.buffer.max_mbytes * 1e6);
-    const hermes::agent::AgentThreadStats t = pipeline_->threadStats();
-    j["threads"] = {{"parallel", t.parallel},
-                    {"ba_jobs", t.mapping.ba_jobs},
-                    {"keyframes_merged", t.mapping.merged},
-                    {"keyframes_skipped", t.mapping.skipped},
-                    {"max_keyframes_waiting", t.mapping.max_waiting},
-                    {"windows_queued", t.windows.pushed},
-                    {"windows_merged", t.windows.merged},
-                    {"window_queue_high_water", t.windows.high_water}};
-    nlohmann::json timings = nlohmann::json::object();  // [ms] per stage, last timing_window samples
-    for (const auto& [stage, st] : pipeline_->timings().summary())
-      timings[stage] = {{"median", st.median}, {"p95", st.p95}, {"count", st.count}};
-    j["timings_ms"] = timings;
-    j["done"] = done_;
-    j["transport"] = mqtt_ ? "mqtt" : "ros";
-    if (!relay_via_.empty()) {
-      j["relay_via"] = relay_via_;
-      j["hop_acks"] = hop_acks_;
-      j["handed_over"] = pipeline_->withUplink(
-          [](const hermes::agent::UplinkSender* up) { return up ? up->handedOverCount() : 0; });
-    }
-    if (relay_) j["relay_for"] = relay_->status();  // per relayed robot
-    if (mqtt_) {
-      const hermes::transport::MqttClientStats m = mqtt_->client().stats();
-      j["mqtt"] = {{"broker", mqtt_->client().broker()}, {"connected", mqtt_->client().connected()},
-                   {"connects", m.connects}, {"sessions_resumed", m.sessions_resumed},
-                   {"losses", m.losses}, {"failed_attempts", m.failed_attempts},
-                   {"published", m.published}, {"refused", m.refused}, {"received", m.received},
-                   {"dropped", m.dropped}, {"malformed", mqtt_->malformed()},
-                   {"last_error", mqtt_->client().lastError()}};
-    }
-    j["frames"] = frameCounts();
+    UplinkStatusContext c;
+    c.robot = robot_;
+    c.uuid = uuid_;
+    c.created = &created_;
+    c.replayed = &replayed_;
+    c.spool_cap_bytes = static_cast<std::int64_t>(params_.uplink.buffer.max_mbytes * 1e6);
+    c.done = done_;
+    c.relay_via = relay_via_;
+    c.hop_acks = hop_acks_;
+    c.relay = relay_.get();
+    c.mqtt = mqtt_.get();
+    c.frames = frameCounts();
     std_msgs::String m;
-    m.data = j.dump();
+    m.data = uplinkStatusJson(*pipeline_, c).dump();
     uplink_status_pub_.publish(m);
   }
 
@@ -825,13 +739,13 @@ class AgentNodelet : public nodelet::Nodelet {
   std::unique_ptr<hermes::agent::AgentPipeline> pipeline_;
   std::int64_t received_a_ = 0, received_b_ = 0, no_camera_ = 0, malformed_ = 0;
   std::int64_t tracked_ = 0, feed_errors_ = 0;
-  ros::Publisher odom_pub_, odom_global_pub_, submap_pub_, heartbeat_pub_, uplink_status_pub_;
+  OdomPublisher odom_;
+  ros::Publisher submap_pub_, heartbeat_pub_, uplink_status_pub_;
   ros::Subscriber global_sub_;
   bool placed_ = false;  ///< the first world <- odom was taken (logged once)
   std::vector<std::pair<std::uint32_t, std::uint64_t>> created_, replayed_;
   bool done_ = false;
   ros::Subscriber ack_sub_, done_sub_, info_a_sub_, info_b_sub_, image_a_sub_, image_b_sub_;
-  tf2_ros::TransformBroadcaster tf_;
   ros::WallTimer timer_, mqtt_timer_;
   ros::Subscriber held_sub_;
   double last_heartbeat_ = 0;
