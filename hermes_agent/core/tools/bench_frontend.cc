@@ -112,6 +112,13 @@ nlohmann::json runJson(const bench::SequenceRun& r) {
   j["tracker_feed_ms"] = stats(r.track_ms);
   j["tracker_feed_cpu_ms"] = stats(r.track_cpu_ms);
   j["keyframe_feed_cpu_ms"] = stats(r.keyframe_cpu_ms);
+  if (!r.entropy_ratio.empty()) {  // where t_l / t_h sit in the frames' own spread
+    std::vector<double> v = r.entropy_ratio;
+    std::sort(v.begin(), v.end());
+    auto q = [&](double f) { return v[std::min(v.size() - 1, std::size_t(f * double(v.size())))]; };
+    j["entropy_ratio"] = {{"min", v.front()}, {"p01", q(0.01)}, {"p05", q(0.05)}, {"median", q(0.5)},
+                          {"p95", q(0.95)}, {"p99", q(0.99)}, {"max", v.back()}, {"frames", v.size()}};
+  }
   return j;
 }
 
@@ -167,7 +174,7 @@ Expected<bench::RenderSpec> parseSequence(const std::string& text) {
 
 /// Keyframe-policy ablation over `sequences`.
 int runAblation(const std::vector<bench::RenderSpec>& sequences, const std::string& cache,
-                const std::string& json_out) {
+                const std::string& json_out, const KeyframePolicyParams& keyframe) {
   nlohmann::json j;
   j["benchmark"] = "frontend_ablation";
   j["note"] =
@@ -183,6 +190,7 @@ int runAblation(const std::vector<bench::RenderSpec>& sequences, const std::stri
     }
     for (const char* policy : {"entropy", "covisibility"}) {
       TrackerParams p;
+      p.keyframe = keyframe;
       p.keyframe.policy = policy;
       std::fprintf(stderr, "[bench frontend] ablation: %s, policy %s\n", spec.describe().c_str(),
                    policy);
@@ -196,11 +204,20 @@ int runAblation(const std::vector<bench::RenderSpec>& sequences, const std::stri
       row["poor_fraction"] = spec.poor_fraction;
       row["policy"] = policy;
       row["dataset"] = *dir;
+      row["render_settings"] = spec.settings;
+      row["entropy_thresholds"] = {{"t_l", keyframe.ratio_low}, {"t_h", keyframe.ratio_high},
+                                   {"fifo", keyframe.entropy_window}};
       row["local_ba_ms"] = localBaJson(r->mapping)["ba_ms"];
       j["runs"].push_back(row);
     }
   }
   return writeJson(j, json_out);
+}
+
+bool argv_has_entropy(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i)
+    if (std::string(argv[i]) == "--entropy") return true;
+  return false;
 }
 
 struct CamCalib {
@@ -249,7 +266,8 @@ int main(int argc, char** argv) {
   std::string data = std::string(env ? env : "/work/shared/data") + "/euroc_V1_01_micro/mav0";
   std::string json_out;
   std::string cache = "/tmp/hermes_bench_frontend";
-  bool render = true, ablation = false;
+  bool render = true, ablation = false, realistic = false;
+  KeyframePolicyParams keyframe;
   std::vector<bench::RenderSpec> sequences;
   int max_frames = 1000;
   for (int i = 1; i < argc; ++i) {
@@ -270,7 +288,12 @@ int main(int argc, char** argv) {
              "keyframe.policy entropy and covisibility; keyframes, ATE, lost rate per run "
              "(first run renders about 2600 stereo pairs: ~10 min)\n"
              "--sequence STEM,START,DURATION,POOR_FRACTION: ablate this slice of "
-             "config/trajectories/STEM.txt instead (repeatable), e.g. V1_01_easy,0,40,0.85\n";
+             "config/trajectories/STEM.txt instead (repeatable), e.g. V1_01_easy,0,40,0.85\n"
+             "--realistic: the ablation's renders with render.realistic=true (blur, exposure, "
+             "noise, dark regions, aliasing, moving objects; cached apart)\n"
+             "--entropy T_L,T_H,K: the entropy rule's thresholds and FIFO length for the "
+             "ablation (default keyframe.ratio_low/high, entropy_window); each entropy run "
+             "reports the spread of r = H / mean(FIFO) over its frames (entropy_ratio)\n";
       return 0;
     } else if (a == "--cache" && i + 1 < argc) {
       cache = argv[++i];
@@ -278,6 +301,16 @@ int main(int argc, char** argv) {
       render = false;
     } else if (a == "--ablation") {
       ablation = true;
+    } else if (a == "--realistic") {
+      realistic = true;
+    } else if (a == "--entropy" && i + 1 < argc) {
+      const std::string v = argv[++i];
+      if (std::sscanf(v.c_str(), "%lf,%lf,%d", &keyframe.ratio_low, &keyframe.ratio_high,
+                      &keyframe.entropy_window) != 3 || !keyframe.validate()) {
+        std::cerr << "hermes_bench_frontend: --entropy wants T_L,T_H,K with T_L < 1 < T_H and K >= 1, got '"
+                  << v << "'\n";
+        return 2;
+      }
     } else if (a == "--sequence" && i + 1 < argc) {
       auto spec = parseSequence(argv[++i]);
       if (!spec.ok()) {
@@ -300,7 +333,16 @@ int main(int argc, char** argv) {
     std::cerr << "hermes_bench_frontend: --sequence belongs to --ablation\n";
     return 2;
   }
-  if (ablation) return runAblation(sequences.empty() ? kAblationSequences : sequences, cache, json_out);
+  if ((realistic || argv_has_entropy(argc, argv)) && !ablation) {
+    std::cerr << "hermes_bench_frontend: --realistic and --entropy belong to --ablation\n";
+    return 2;
+  }
+  if (ablation) {
+    std::vector<bench::RenderSpec> specs = sequences.empty() ? kAblationSequences : sequences;
+    if (realistic)
+      for (bench::RenderSpec& s : specs) s.settings.push_back("render.realistic=true");
+    return runAblation(specs, cache, json_out, keyframe);
+  }
   auto c0 = readSensorYaml(data + "/cam0/sensor.yaml");
   auto c1 = readSensorYaml(data + "/cam1/sensor.yaml");
   if (!c0.ok() || !c1.ok()) {

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <string>
@@ -80,6 +81,7 @@ struct SequenceRun {
   std::vector<double> track_cpu_ms;        ///< ... process CPU time (less load-sensitive)
   std::vector<double> keyframe_cpu_ms;     ///< ... of the feeds that inserted a keyframe
   std::vector<LocalMappingStats> mapping;  ///< one per inserted keyframe (after the first)
+  std::vector<double> entropy_ratio;       ///< r = H / mean(FIFO) of every frame once the FIFO is full (policy entropy)
   double lostRate() const { return frames > 0 ? double(lost) / frames : 0.0; }
 };
 
@@ -107,6 +109,9 @@ inline Expected<SequenceRun> trackDataset(const std::string& dir, const TrackerP
     out.track_cpu_ms.push_back(cpu_ms);
     if (!r.ok()) return Error{dir + ": " + r.error()};
     if (r->new_keyframe) out.keyframe_cpu_ms.push_back(cpu_ms);
+    if (params.keyframe.policy == "entropy" && out.frames >= params.keyframe.entropy_window &&
+        std::isfinite(r->keyframe.ratio))
+      out.entropy_ratio.push_back(r->keyframe.ratio);
     ++out.frames;
     if (r->new_keyframe) {
       const KeyframeDecision& d = r->keyframe;
