@@ -9,6 +9,8 @@
 
 #include <ceres/ceres.h>
 
+#include "hermes/server/pose_graph.h"
+
 namespace hermes {
 namespace server {
 namespace {
@@ -95,7 +97,9 @@ Status MapRefinementParams::read(const Config& config, const std::string& prefix
                    config.get(p + "loss_scale", &loss_scale),
                    config.get(p + "max_iterations", &max_iterations),
                    config.get(p + "max_time_s", &max_time_s),
-                   config.get(p + "max_pose_change_m", &max_pose_change_m)})
+                   config.get(p + "max_pose_change_m", &max_pose_change_m),
+                   config.get(p + "keep_in_pose_graph", &keep_in_pose_graph),
+                   config.get(p + "odometry_weight", &odometry_weight)})
     if (!s) return s;
   if (Status s = validate(); !s) return Error{prefix + ": " + s.error()};
   return Status::Ok();
@@ -118,6 +122,8 @@ void MapRefinementParams::write(ConfigWriter* w, const std::string& prefix) cons
   w->set(p + "max_iterations", max_iterations);
   w->set(p + "max_time_s", max_time_s);
   w->set(p + "max_pose_change_m", max_pose_change_m);
+  w->set(p + "keep_in_pose_graph", keep_in_pose_graph);
+  w->set(p + "odometry_weight", odometry_weight);
 }
 
 Status MapRefinementParams::validate() const {
@@ -135,6 +141,7 @@ Status MapRefinementParams::validate() const {
   if (max_iterations < 1) return Error{"max_iterations must be >= 1"};
   if (!(max_time_s > 0)) return Error{"max_time_s must be > 0"};
   if (!(max_pose_change_m > 0)) return Error{"max_pose_change_m must be > 0"};
+  if (!(odometry_weight >= 0)) return Error{"odometry_weight must be >= 0"};
   return Status::Ok();
 }
 
@@ -301,6 +308,25 @@ MapRefinementResult refineAroundLoops(GlobalMap* map, const std::vector<std::uin
     }
   }
   for (const auto& [pk, n] : per_point) res.landmarks += n >= 2;
+  // The agents' odometry between consecutive keyframes of the window.
+  std::set<TrajectoryId> trajs;
+  for (const KeyframeKey& k : free) trajs.insert(trajOf(k));
+  auto inProblem = [&](const KeyframeKey& k) { return per_kf.count(k) > 0; };
+  auto isFree = [&](const KeyframeKey& k) { return inProblem(k) && poses.at(k).free; };
+  for (const TrajectoryId& tid : trajs) {
+    if (params.odometry_weight <= 0) break;
+    const TrajectoryMap& t = map->trajectories.at(tid);
+    for (const auto& [ids, e] : t.odometry) {
+      const KeyframeKey a = keyIn(tid, ids.first), b = keyIn(tid, ids.second);
+      if (!inProblem(a) || !inProblem(b) || (!isFree(a) && !isFree(b))) continue;
+      Expected<Mat6> L = sqrtInformation(params.odometry_weight * e.information);
+      if (!L) continue;
+      PoseBlock& pa = poses.at(a);
+      PoseBlock& pb = poses.at(b);
+      problem.AddResidualBlock(RelativePoseError::create(e.T_from_to, *L), nullptr, pa.q, pa.t, pb.q, pb.t);
+      ++res.odometry;
+    }
+  }
   if (res.free_keyframes == 0 || res.residuals == 0) return finish("nothing free in the window");
 
   ceres::Solver::Options opt;
@@ -338,14 +364,10 @@ MapRefinementResult refineAroundLoops(GlobalMap* map, const std::vector<std::uin
     lm.p_anchor = anchor->T_W_C.inverse() * Vec3(pt.p[0], pt.p[1], pt.p[2]);
   }
   // Pose-graph edges inside the window keep the refined relative poses.
-  auto inProblem = [&](const KeyframeKey& k) { return per_kf.count(k) > 0; };
-  auto isFree = [&](const KeyframeKey& k) { return inProblem(k) && poses.at(k).free; };
   auto keep = [&](const KeyframeKey& a, const KeyframeKey& b) {
-    if (!inProblem(a) || !inProblem(b) || (!isFree(a) && !isFree(b))) return;
+    if (!params.keep_in_pose_graph || !inProblem(a) || !inProblem(b) || (!isFree(a) && !isFree(b))) return;
     map->refined_edges[{a, b}] = map->keyframe(a)->T_W_C.inverse() * map->keyframe(b)->T_W_C;
   };
-  std::set<TrajectoryId> trajs;
-  for (const KeyframeKey& k : free) trajs.insert(trajOf(k));
   for (const TrajectoryId& tid : trajs) {
     const TrajectoryMap& t = map->trajectories.at(tid);
     for (auto it = t.keyframes.begin(); it != t.keyframes.end() && std::next(it) != t.keyframes.end(); ++it)

@@ -50,6 +50,14 @@ struct MapRefinementParams {
   int max_iterations = 15;           ///< Levenberg-Marquardt iterations per window
   double max_time_s = 0.25;          ///< [s] solver time budget per window
   double max_pose_change_m = 0.10;   ///< [m] a solution moving a keyframe further is discarded
+  /// Store the window's relative poses in GlobalMap::refined_edges (the pose
+  /// graph keeps them); false: the refined poses are only the next solve's start.
+  bool keep_in_pose_graph = true;
+  /// Odometry edges (the agents' own, as received) between consecutive keyframes
+  /// of the window as relative-pose residuals, information x this (0 = none):
+  /// the server holds only the distilled landmarks, fewer than the agent's
+  /// local BA used for those relative poses.
+  double odometry_weight = 1.0;
 
   Status read(const Config& config, const std::string& prefix);
   void write(ConfigWriter* writer, const std::string& prefix) const;
@@ -62,7 +70,7 @@ struct MapRefinementResult {
   std::string termination;    ///< Ceres' termination type, or why nothing ran
   int iterations = 0;
   int free_keyframes = 0, fixed_keyframes = 0, landmarks = 0;
-  int residuals = 0, ties = 0;
+  int residuals = 0, ties = 0, odometry = 0;
   double initial_cost = 0, final_cost = 0;
   double max_pose_change_m = 0;
   double time_ms = 0;
