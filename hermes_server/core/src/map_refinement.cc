@@ -139,7 +139,7 @@ Status MapRefinementParams::validate() const {
   if (loss != "none" && loss != "huber" && loss != "cauchy") return Error{"loss must be none, huber or cauchy"};
   if (!(loss_scale > 0)) return Error{"loss_scale must be > 0"};
   if (max_iterations < 1) return Error{"max_iterations must be >= 1"};
-  if (!(max_time_s > 0)) return Error{"max_time_s must be > 0"};
+  if (!(max_time_s >= 0)) return Error{"max_time_s must be >= 0"};
   if (!(max_pose_change_m > 0)) return Error{"max_pose_change_m must be > 0"};
   if (!(odometry_weight >= 0)) return Error{"odometry_weight must be >= 0"};
   return Status::Ok();
@@ -332,7 +332,7 @@ MapRefinementResult refineAroundLoops(GlobalMap* map, const std::vector<std::uin
   ceres::Solver::Options opt;
   opt.linear_solver_type = ceres::SPARSE_SCHUR;
   opt.max_num_iterations = params.max_iterations;
-  opt.max_solver_time_in_seconds = params.max_time_s;
+  if (params.max_time_s > 0) opt.max_solver_time_in_seconds = params.max_time_s;
   opt.num_threads = 1;
   opt.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;

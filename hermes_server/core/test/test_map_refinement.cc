@@ -89,6 +89,14 @@ Scene makeScene() {
       t.keyframes[sk.keyframe.id] = std::move(sk);
     }
     for (auto& [id, lm] : t.landmarks) GlobalMap::anchorLandmark(t, &lm);
+    for (int i = 0; i + 1 < kKeyframes; ++i) {  // exact odometry, 1 cm / 10 mrad sigmas
+      OdometryEdge e;
+      e.from = i;
+      e.to = i + 1;
+      e.T_from_to = truePose(robot, i).inverse() * truePose(robot, i + 1);
+      e.information = Mat6::Identity() * 1e4;
+      t.odometry[{e.from, e.to}] = e;
+    }
   }
   // The loop: robot 0's keyframe kLoopKf (a) <-> robot 1's (b); pairs = shared points.
   LoopEdge loop;
@@ -222,6 +230,7 @@ TEST(MapRefinement, LowersPoseAndLandmarkErrorOfTwoRobotWindow) {
   EXPECT_EQ(r.free_keyframes, 14);
   EXPECT_GT(r.fixed_keyframes, 0);
   EXPECT_GT(r.ties, 50);
+  EXPECT_EQ(r.odometry, 2 * 8);  // kLoopKf +- 3 free: 6 edges inside, one to each held side
   EXPECT_LT(after.pose_m, before.pose_m / 10) << before.pose_m << " -> " << after.pose_m;
   EXPECT_LT(after.landmark_m, before.landmark_m / 5) << before.landmark_m << " -> " << after.landmark_m;
   EXPECT_LT(ties_after.cross_reproj_rms_px, ties_before.cross_reproj_rms_px / 5);
@@ -299,7 +308,7 @@ TEST(MapRefinement, ParamsValidate) {
   p.loss = "l1";
   EXPECT_FALSE(p.validate().ok());
   p = MapRefinementParams();
-  p.max_time_s = 0;
+  p.max_time_s = -1;
   EXPECT_FALSE(p.validate().ok());
 }
 

@@ -48,7 +48,9 @@ struct MapRefinementParams {
   std::string loss = "huber";        ///< none | huber | cauchy
   double loss_scale = 2.0;           ///< [sigma] robust loss scale on the whitened residual
   int max_iterations = 15;           ///< Levenberg-Marquardt iterations per window
-  double max_time_s = 0.25;          ///< [s] solver time budget per window
+  /// [s] solver wall-time budget per window; 0 = none (the iteration cap only):
+  /// a wall-time limit makes the merged map depend on the machine's load.
+  double max_time_s = 0;
   double max_pose_change_m = 0.10;   ///< [m] a solution moving a keyframe further is discarded
   /// Store the window's relative poses in GlobalMap::refined_edges (the pose
   /// graph keeps them); false: the refined poses are only the next solve's start.
