@@ -15,7 +15,8 @@ namespace {
 constexpr char kMagic[4] = {'H', 'G', 'M', 'P'};
 // 1: trajectories as wire-format submap frames (lossy: float information,
 //    observations rebuilt). 2: every field as stored, loops with inliers.
-constexpr std::uint32_t kVersion = 2;
+// 3: + loop inlier keypoint pairs, refined edges (map refinement).
+constexpr std::uint32_t kVersion = 3;
 constexpr std::size_t kKeypointBytes = 4 + 4 + 1 + 4 + 32 + 8;  // + descriptor + landmark
 
 void writeCamera(ByteWriter* w, const PinholeIntrinsics& c) {
@@ -173,6 +174,13 @@ void writeLoop(ByteWriter* w, const LoopEdge& l) {
   w->flag(l.accepted);
   w->pod(static_cast<std::int32_t>(l.inliers));
   w->pod(static_cast<std::int32_t>(l.depth_inliers));
+  w->count(l.matches.size());
+  for (const LoopMatch& m : l.matches) {
+    w->pod(m.kf_a);
+    w->pod(m.kp_a);
+    w->pod(m.kf_b);
+    w->pod(m.kp_b);
+  }
 }
 
 bool readLoop(ByteReader* r, LoopEdge* l) {
@@ -183,6 +191,22 @@ bool readLoop(ByteReader* r, LoopEdge* l) {
     return false;
   l->inliers = inliers;
   l->depth_inliers = depth_inliers;
+  std::uint64_t n = 0;
+  if (!r->count(&n, 24)) return false;
+  l->matches.resize(n);
+  for (LoopMatch& m : l->matches)
+    if (!r->pod(&m.kf_a) || !r->pod(&m.kp_a) || !r->pod(&m.kf_b) || !r->pod(&m.kp_b)) return false;
+  return true;
+}
+
+/// A loop's kept keypoint pairs name keyframes and keypoints the map holds.
+bool matchesValid(const GlobalMap& map, const LoopEdge& l) {
+  for (const LoopMatch& m : l.matches) {
+    const StoredKeyframe* a = map.keyframe(KeyframeKey{l.a.agent, l.a.session, m.kf_a});
+    const StoredKeyframe* b = map.keyframe(KeyframeKey{l.b.agent, l.b.session, m.kf_b});
+    if (!a || !b || m.kp_a >= a->keyframe.keypoints.size() || m.kp_b >= b->keyframe.keypoints.size())
+      return false;
+  }
   return true;
 }
 
@@ -250,6 +274,12 @@ std::vector<std::uint8_t> GlobalMap::toBytes() const {
   for (const auto& [tid, t] : trajectories) writeTrajectory(&w, t);
   w.count(loops.size());
   for (const LoopEdge& l : loops) writeLoop(&w, l);
+  w.count(refined_edges.size());
+  for (const auto& [ends, T] : refined_edges) {
+    w.key(ends.first);
+    w.key(ends.second);
+    w.pose(T);
+  }
   w.pod(crc32(w.out.data(), w.out.size()));
   return w.out;
 }
@@ -285,7 +315,19 @@ Expected<GlobalMap> GlobalMap::fromBytes(const std::vector<std::uint8_t>& bytes,
     if (!readLoop(&r, &l)) return Error{where + "loop " + std::to_string(i) + " damaged"};
     if (!map.keyframe(l.a) || !map.keyframe(l.b))
       return Error{where + "loop " + std::to_string(l.id) + " joins a keyframe the map does not hold"};
-    map.loops.push_back(l);
+    if (!matchesValid(map, l))
+      return Error{where + "loop " + std::to_string(l.id) + " keeps a keypoint pair the map does not hold"};
+    map.loops.push_back(std::move(l));
+  }
+  if (!r.count(&count, 2 * 16 + 56)) return Error{where + "bad refined edge count"};
+  for (std::uint64_t i = 0; i < count; ++i) {
+    KeyframeKey from, to;
+    SE3 T;
+    if (!r.key(&from) || !r.key(&to) || !r.pose(&T))
+      return Error{where + "refined edge " + std::to_string(i) + " damaged"};
+    if (!map.keyframe(from) || !map.keyframe(to))
+      return Error{where + "refined edge " + std::to_string(i) + " joins a keyframe the map does not hold"};
+    map.refined_edges[{from, to}] = T;
   }
   if (!r.atEnd()) return Error{where + "trailing bytes before the CRC"};
   return map;

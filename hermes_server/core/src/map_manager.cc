@@ -25,7 +25,8 @@ KeyframeKey keyOf(const TrajectoryMap& t, KeyframeId id) {
 Status MapManagerParams::read(const Config& config, const std::string& prefix) {
   for (Status s : {place_recognition.read(config, prefix + "place_recognition."),
                    loop_closure.read(config, prefix + "loop_closure"),
-                   pcm.read(config, prefix + "pcm"), pose_graph.read(config, prefix + "pose_graph")})
+                   pcm.read(config, prefix + "pcm"), pose_graph.read(config, prefix + "pose_graph"),
+                   refinement.read(config, prefix + "refinement")})
     if (!s) return s;
   const std::string p = prefix + "map.";
   struct IntKey { const char* name; int* v; };
@@ -51,6 +52,7 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   loop_closure.write(&out, prefix + "loop_closure");
   pcm.write(&out, prefix + "pcm");
   pose_graph.write(&out, prefix + "pose_graph");
+  refinement.write(&out, prefix + "refinement");
   const std::string p = prefix + "map.";
   out.set(p + "rig_neighbours", rig_neighbours);
   out.set(p + "max_candidates_per_keyframe", max_candidates_per_keyframe);
@@ -71,6 +73,7 @@ Status MapManagerParams::validate() const {
   if (!(spatial_max_angle_deg > 0 && spatial_max_angle_deg <= 180))
     return Error{"spatial_max_angle_deg must be in (0, 180]"};
   if (Status s = odometry.validate(); !s) return Error{"odometry: " + s.error()};
+  if (Status s = refinement.validate(); !s) return Error{"refinement: " + s.error()};
   if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
   if (loop_threads < 1 || loop_threads > 64) return Error{"loop_threads must be in 1..64"};
   return Status::Ok();
@@ -235,6 +238,21 @@ std::optional<LoopEdge> MapManager::loopEdge(const KeyframeKey& query, const Key
   e.covariance = r.covariance;
   e.inliers = r.num_inliers;
   e.depth_inliers = r.num_depth_inliers;
+  // Keep up to ties_per_loop inlier pairs (evenly spaced), rig cameras as keyframe ids.
+  std::vector<PinholeIntrinsics> cams;
+  std::vector<KeyframeId> rig_q{query.id}, rig_c{candidate.id};
+  for (const Keyframe* k : neighbours(query, &cams)) rig_q.push_back(k->id);
+  for (const Keyframe* k : neighbours(candidate, &cams)) rig_c.push_back(k->id);
+  const std::size_t n = r.inlier_matches.size();
+  const std::size_t keep = std::min<std::size_t>(n, static_cast<std::size_t>(params_.refinement.ties_per_loop));
+  for (std::size_t j = 0; j < keep; ++j) {
+    const RigMatch& m = r.inlier_matches[j * n / keep];
+    if (m.cam_q < 0 || m.cam_c < 0 || m.cam_q >= static_cast<int>(rig_q.size()) ||
+        m.cam_c >= static_cast<int>(rig_c.size()))
+      continue;
+    e.matches.push_back(LoopMatch{rig_q[m.cam_q], static_cast<std::uint32_t>(m.kp_q), rig_c[m.cam_c],
+                                  static_cast<std::uint32_t>(m.kp_c)});
+  }
   return e;
 }
 
@@ -360,6 +378,7 @@ void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, Merge
     if (!e || e->inliers < loop.inliers) continue;  // keep the earlier measurement
     e->id = loop.id;
     e->accepted = loop.accepted;
+    map_.refined_edges.erase({loop.a, loop.b});  // a new measurement replaces the refined one
     loop = *e;
     touched_.insert(loop.a);
     touched_.insert(loop.b);
@@ -498,8 +517,10 @@ Expected<PoseGraph> MapManager::buildPoseGraph() const {
       }
       if (prev) {
         auto e = t.odometry.find({prev_id, id});
-        const SE3 T = e != t.odometry.end() ? e->second.T_from_to
-                                            : prev->keyframe.T_A_C.inverse() * kf.keyframe.T_A_C;
+        auto refined = map_.refined_edges.find({keyOf(t, prev_id), key});  // map_refinement.h
+        const SE3 T = refined != map_.refined_edges.end() ? refined->second
+                      : e != t.odometry.end()             ? e->second.T_from_to
+                                                          : prev->keyframe.T_A_C.inverse() * kf.keyframe.T_A_C;
         const Mat6 info = e != t.odometry.end() ? e->second.information
                                                 : bridgeInformation(prev->keyframe, kf.keyframe);
         if (Status s = graph.addOdometryEdge(keyOf(t, prev_id), key, T, info); !s) return Error{s.error()};
@@ -511,7 +532,9 @@ Expected<PoseGraph> MapManager::buildPoseGraph() const {
   if (!fixed) return Error{"no anchored world trajectory yet"};
   for (const LoopEdge& e : map_.loops) {
     if (!e.accepted || !graph.hasNode(e.a) || !graph.hasNode(e.b)) continue;
-    if (Status s = graph.addLoopEdge(e.a, e.b, e.T_a_b, e.information); !s) return Error{s.error()};
+    auto refined = map_.refined_edges.find({e.a, e.b});
+    const SE3& T = refined != map_.refined_edges.end() ? refined->second : e.T_a_b;
+    if (Status s = graph.addLoopEdge(e.a, e.b, T, e.information); !s) return Error{s.error()};
   }
   return graph;
 }
@@ -579,6 +602,7 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
   stats.keyframes = static_cast<int>(added.size());
   stats.landmarks = static_cast<int>(submap.landmarks.size());
   const std::size_t loops_before = map_.loops.size();
+  const std::set<std::uint64_t> accepted_before = accepted_;
   extendKeyframes(extended, &stats);
   detectLoops(added, &stats);
   if (stats.loops_replaced > 0) graph_dirty_ = true;  // a loop's measurement changed
@@ -593,6 +617,19 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
                        merges_since_optimize_ >= params_.optimize_every_submaps)) {
     if (Status s = optimize(); !s) return Error{s.error()};
     stats.optimized = true;
+  }
+  if (params_.refinement.enabled) {  // bundle adjustment around the newly accepted loops
+    std::vector<std::uint64_t> fresh;
+    for (std::uint64_t id : accepted_)
+      if (!accepted_before.count(id)) fresh.push_back(id);
+    if (!fresh.empty()) {
+      t0 = Clock::now();
+      refine_diag_.last = refineAroundLoops(&map_, fresh, params_.refinement);
+      timings_.add("map_refinement", msSince(t0));
+      refine_diag_.runs += refine_diag_.last.ran;
+      refine_diag_.applied += refine_diag_.last.applied;
+      stats.refined = refine_diag_.last.applied;
+    }
   }
   timings_.add("merge_total", msSince(t_total));
   return stats;

@@ -31,7 +31,8 @@ namespace hermes {
 namespace server {
 
 /// 2: per-session anchoring and re-localisation state (bookkeeper).
-constexpr std::uint32_t kCheckpointVersion = 2;
+/// 3: global map version 3 inside (loop keypoint pairs, refined edges).
+constexpr std::uint32_t kCheckpointVersion = 3;
 constexpr std::uint32_t kJournalVersion = 1;
 
 struct CheckpointParams {

@@ -4,10 +4,12 @@
 // and the loop edges. Landmarks follow their anchor keyframe (the keyframe of
 // their first observation): p_W = T_W_C(anchor) * p_C.
 //
-// Binary file (save/load): "HGMP" magic, version 2, every trajectory field by field
+// Binary file (save/load): "HGMP" magic, version 3, every trajectory field by field
 // (keyframes with keypoints, descriptors and landmark links, landmarks with their
-// anchors and observations, odometry edges), loop edges with their PCM verdicts
-// and inliers, CRC-32 of everything before it. Lossless: a map saved and loaded
+// anchors and observations, odometry edges), loop edges with their PCM verdicts,
+// inlier counts and kept inlier keypoint pairs, the map refinement's relative
+// poses (map_refinement.h), CRC-32 of everything before it. Other versions are
+// refused with a message naming both. Lossless: a map saved and loaded
 // holds exactly what it held (the server checkpoint embeds it).
 #pragma once
 
@@ -49,6 +51,20 @@ struct TrajectoryMap {
   std::map<std::pair<KeyframeId, KeyframeId>, OdometryEdge> odometry;
 };
 
+/// One inlier correspondence of a loop closure, kept for the map refinement's
+/// cross-robot ties: keypoint kp_a of keyframe kf_a (in the trajectory of
+/// LoopEdge::a; the rig's keyframe, not necessarily a itself) sees the same
+/// point as keypoint kp_b of keyframe kf_b (trajectory of LoopEdge::b).
+struct LoopMatch {
+  KeyframeId kf_a = kInvalidId;
+  std::uint32_t kp_a = 0;
+  KeyframeId kf_b = kInvalidId;
+  std::uint32_t kp_b = 0;
+  bool operator==(const LoopMatch& o) const {
+    return kf_a == o.kf_a && kp_a == o.kp_a && kf_b == o.kf_b && kp_b == o.kp_b;
+  }
+};
+
 struct LoopEdge {
   std::uint64_t id = 0;
   KeyframeKey a, b;           ///< a = query, b = candidate
@@ -58,12 +74,19 @@ struct LoopEdge {
   bool accepted = false;      ///< by PCM (latest run)
   int inliers = 0;            ///< geometric inliers of the loop closure
   int depth_inliers = 0;      ///< of which with a measured depth in at least one view
+  /// Inlier keypoint pairs kept (server.refinement.ties_per_loop, evenly spaced).
+  std::vector<LoopMatch> matches;
 };
 
 class GlobalMap {
  public:
   std::map<TrajectoryId, TrajectoryMap> trajectories;
   std::vector<LoopEdge> loops;
+  /// Relative poses T_from_to that the map refinement (map_refinement.h) found
+  /// for pose-graph edges (odometry between consecutive keyframes, loops) inside
+  /// its windows; the pose graph uses them in place of the edge's measurement
+  /// (same information), so that its next solve keeps what the refinement did.
+  std::map<std::pair<KeyframeKey, KeyframeKey>, SE3> refined_edges;
 
   const StoredKeyframe* keyframe(const KeyframeKey& key) const;
   StoredKeyframe* keyframe(const KeyframeKey& key);

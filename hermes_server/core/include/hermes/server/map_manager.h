@@ -22,6 +22,7 @@
 #include "hermes/server/bookkeeper.h"
 #include "hermes/server/global_map.h"
 #include "hermes/server/loop_closure.h"
+#include "hermes/server/map_refinement.h"
 #include "hermes/server/pcm.h"
 #include "hermes/server/place_recognition.h"
 #include "hermes/server/pose_graph.h"
@@ -37,6 +38,7 @@ struct MapManagerParams {
   LoopClosureParams loop_closure;            ///< server.loop_closure.*
   PcmParams pcm;                             ///< server.pcm.*
   PoseGraphParams pose_graph;                ///< server.pose_graph.*
+  MapRefinementParams refinement;            ///< server.refinement.*
   // server.map.*
   int rig_neighbours = 2;              ///< m neighbours per rig side
   int max_candidates_per_keyframe = 2; ///< place candidates verified per keyframe
@@ -81,6 +83,14 @@ struct MergeStats {
   int place_candidates = 0;
   int loops_attempted = 0, loops_geometric = 0;
   bool optimized = false;
+  bool refined = false;        ///< the map refinement ran around this merge's new loops
+};
+
+/// What the map refinement (map_refinement.h) did so far.
+struct RefinementDiagnostics {
+  MapRefinementResult last;
+  int runs = 0;      ///< windows solved
+  int applied = 0;   ///< of those, written back
 };
 
 /// What the last pose-graph solve did (diagnostics: where the merged map departs
@@ -141,6 +151,7 @@ class MapManager {
   const GlobalMap& map() const { return map_; }
   const TimingStats& timings() const { return timings_; }
   const GraphDiagnostics& graphDiagnostics() const { return graph_diag_; }
+  const RefinementDiagnostics& refinementDiagnostics() const { return refine_diag_; }
   /// The loop rig's other keyframes around stored keyframe `key` (rig_neighbours,
   /// earlier ones first, never across a loss of tracking); `cams` gets the
   /// cameras of key and then of each neighbour.
@@ -219,6 +230,7 @@ class MapManager {
   GlobalMap map_;
   TimingStats timings_;
   GraphDiagnostics graph_diag_;
+  RefinementDiagnostics refine_diag_;
   std::uint64_t next_loop_id_ = 0;
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;
