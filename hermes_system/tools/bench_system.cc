@@ -61,6 +61,9 @@ const char* kUsage =
     "                   from ../shared/data/euroc_gt when a sequence is missing)\n"
     "  --swarm-sequences L  (default MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,\n"
     "                   MH_05_difficult)\n"
+    "  --run-out DIR    also write each run's outputs as `hermes run` does (metrics.json,\n"
+    "                   loops.csv, loop_attempts.csv but for false_candidates, ...) to\n"
+    "                   DIR/<variant>_<robots>\n"
     "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
 
 std::vector<std::string> split(const std::string& s) {
@@ -161,7 +164,8 @@ Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::str
 
 /// One offline run of `variant` with all `robots` sharing a `bw` Mbit/s link.
 Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw, const Robots& robots,
-                                    const std::vector<std::string>& overrides) {
+                                    const std::vector<std::string>& overrides,
+                                    const std::string& run_out = "") {
   std::vector<std::string> sets = overrides;
   for (const std::string& s : variantSets(v)) sets.push_back(s);
   sets.push_back("link.bandwidth_mbitps=" + bw);
@@ -183,10 +187,23 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   if (!run.ok()) return Error{run.error()};
   std::size_t injected = 0;
   if (v == "false_candidates") injectFalseCandidates(**run, 0.2, &injected);
+  std::vector<server::LoopAttempt> attempts;
+  if (!run_out.empty() && v != "false_candidates")  // that variant's hook holds the one slot
+    (*run)->onServerCreated([&attempts](server::Server& srv) {
+      srv.mapManager().setAttemptHook([&attempts](const server::LoopAttempt& a) { attempts.push_back(a); });
+    });
   const auto t0 = std::chrono::steady_clock::now();
   if (Status s = (*run)->run(); !s) return Error{s.error()};
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const system::RunResults r = system::evaluateRun(**run);
+  if (!run_out.empty()) {
+    const fs::path out = fs::path(run_out) / (v + "_" + std::to_string(robots.size()));
+    std::error_code mk;
+    fs::create_directories(out, mk);
+    if (Status w = system::writeRunResults(**run, r, out.string()); !w) return Error{w.error()};
+    if (Status w = system::writeLoopAttempts(**run, attempts, (out / "loop_attempts.csv").string()); !w)
+      return Error{w.error()};
+  }
   nlohmann::json j = system::resultsJson(r);
   j["variant"] = v;
   j["agents"] = robots.size();
@@ -257,6 +274,7 @@ int main(int argc, char** argv) {
   std::string json_out;
   std::vector<std::string> swarm;
   std::string swarm_bw = "50";
+  std::string run_out;
   std::string swarm_data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
   std::vector<std::string> swarm_seqs =
       split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult");
@@ -289,6 +307,8 @@ int main(int argc, char** argv) {
       swarm = split(next());
     } else if (a == "--swarm-bandwidth") {
       swarm_bw = next();
+    } else if (a == "--run-out") {
+      run_out = next();
     } else if (a == "--swarm-data") {
       swarm_data = next();
     } else if (a == "--swarm-sequences") {
@@ -329,7 +349,7 @@ int main(int argc, char** argv) {
       auto robots = swarmRobots(swarm_data, swarm_seqs, views, duration, rate, std::atoi(n.c_str()));
       if (!robots.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", robots.error().c_str()), 1;
       for (const std::string& v : variants) {
-        auto j = runVariant(v, swarm_bw, *robots, overrides);
+        auto j = runVariant(v, swarm_bw, *robots, overrides, run_out);
         if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
         printSwarmRow(v, *j);
         runs.push_back(*j);
