@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <iterator>
+#include <map>
 
 namespace hermes {
 namespace server {
@@ -37,7 +38,8 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"optimize_every_submaps", &optimize_every_submaps},
                    IntKey{"min_world_loops", &min_world_loops},
                    IntKey{"loop_threads", &loop_threads},
-                   IntKey{"duplicate_neighbours", &duplicate_neighbours}})
+                   IntKey{"duplicate_neighbours", &duplicate_neighbours},
+                   IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
   for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
@@ -64,6 +66,7 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "min_world_loops", min_world_loops);
   out.set(p + "loop_threads", loop_threads);
   out.set(p + "duplicate_neighbours", duplicate_neighbours);
+  out.set(p + "duplicate_min_pair_loops", duplicate_min_pair_loops);
 }
 
 Status MapManagerParams::validate() const {
@@ -78,6 +81,7 @@ Status MapManagerParams::validate() const {
   if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
   if (loop_threads < 1 || loop_threads > 64) return Error{"loop_threads must be in 1..64"};
   if (duplicate_neighbours < 0) return Error{"duplicate_neighbours must be >= 0"};
+  if (duplicate_min_pair_loops < 0) return Error{"duplicate_min_pair_loops must be >= 0"};
   return Status::Ok();
 }
 
@@ -276,13 +280,22 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
   const std::vector<std::vector<std::size_t>> dups = nearDuplicates(jobs);
   std::vector<LoopClosureResult> results(jobs.size());
   std::vector<char> skipped(jobs.size(), 0);
+  // First-round loops per (query trajectory, candidate trajectory).
+  using TrajPair = std::pair<std::pair<RobotId, std::uint32_t>, std::pair<RobotId, std::uint32_t>>;
+  const auto trajPair = [](const LoopJob& j) {
+    return TrajPair{{j.query.agent, j.query.session}, {j.candidate->key.agent, j.candidate->key.session}};
+  };
+  std::map<TrajPair, int> pair_loops;
   for (int round = 0; round < 2; ++round) {
+    if (round == 1)
+      for (std::size_t i = 0; i < jobs.size(); ++i)
+        if (jobs[i].candidate && dups[i].empty() && results[i].ok()) ++pair_loops[trajPair(jobs[i])];
     std::vector<std::size_t> which;
     std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
     for (std::size_t i = 0; i < jobs.size(); ++i) {
       if (!jobs[i].candidate || dups[i].empty() != (round == 0)) continue;
-      if (round == 1 && std::any_of(dups[i].begin(), dups[i].end(),
-                                    [&](std::size_t d) { return results[d].ok(); })) {
+      if (round == 1 && pair_loops[trajPair(jobs[i])] >= params_.duplicate_min_pair_loops &&
+          std::any_of(dups[i].begin(), dups[i].end(), [&](std::size_t d) { return results[d].ok(); })) {
         skipped[i] = 1;
         continue;
       }

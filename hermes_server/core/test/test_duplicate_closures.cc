@@ -1,7 +1,8 @@
 // Near-duplicate closures (server.map.duplicate_neighbours): within one merge,
 // a closure whose query and candidate keyframes each sit next to those of an
 // earlier closure that gave a loop (same two trajectories) is not verified;
-// one whose earlier twin gave no loop still is.
+// one whose earlier twin gave no loop still is; with duplicate_min_pair_loops
+// only where the merge's first round tied the two trajectories that often.
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -38,9 +39,10 @@ int position(const GlobalMap& map, const KeyframeKey& k) {
   return it == t->keyframes.end() ? -1 : static_cast<int>(std::distance(t->keyframes.begin(), it));
 }
 
-Trace run(const fixture::Fixture& fx, int duplicate_neighbours) {
+Trace run(const fixture::Fixture& fx, int duplicate_neighbours, int min_pair_loops = 0) {
   ServerParams params;
   params.map.duplicate_neighbours = duplicate_neighbours;
+  params.map.duplicate_min_pair_loops = min_pair_loops;
   auto created = Server::create(params, HERMES_SOURCE_DIR);
   EXPECT_TRUE(created.ok()) << created.error();
   Server& server = **created;
@@ -84,16 +86,20 @@ class DuplicateClosures : public ::testing::Test {
     ASSERT_TRUE(fx.ok()) << fx.error();
     off_ = new Trace(run(*fx, 0));
     on_ = new Trace(run(*fx, 2));
+    sparse_ = new Trace(run(*fx, 2, 1000));
   }
   static void TearDownTestSuite() {
     delete off_;
     delete on_;
+    delete sparse_;
   }
   static Trace* off_;
   static Trace* on_;
+  static Trace* sparse_;  ///< duplicate_min_pair_loops above any merge's loops
 };
 Trace* DuplicateClosures::off_ = nullptr;
 Trace* DuplicateClosures::on_ = nullptr;
+Trace* DuplicateClosures::sparse_ = nullptr;
 
 TEST_F(DuplicateClosures, FewerClosuresVerifiedSameRobotsMerged) {
   ASSERT_TRUE(off_ && on_);
@@ -123,12 +129,21 @@ TEST_F(DuplicateClosures, OnlyNeighboursOfALoopOfTheSameMergeAreSkipped) {
   }
 }
 
+TEST_F(DuplicateClosures, PairsWithFewLoopsInTheMergeKeepEveryClosure) {
+  ASSERT_TRUE(off_ && sparse_);
+  EXPECT_EQ(sparse_->skipped, 0);
+  EXPECT_EQ(sparse_->verified, off_->verified);
+  EXPECT_EQ(sparse_->accepted, off_->accepted);
+}
+
 TEST(DuplicateClosuresParams, NegativeIsRejected) {
   MapManagerParams p;
   p.duplicate_neighbours = -1;
   EXPECT_FALSE(p.validate().ok());
   p.duplicate_neighbours = 0;
   EXPECT_TRUE(p.validate().ok());
+  p.duplicate_min_pair_loops = -1;
+  EXPECT_FALSE(p.validate().ok());
 }
 
 }  // namespace

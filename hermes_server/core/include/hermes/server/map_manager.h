@@ -72,6 +72,10 @@ struct MapManagerParams {
   /// ones only when none of the first ones they duplicate gave a loop (two
   /// rounds, so the loops are the same for any loop_threads). 0 = verify all.
   int duplicate_neighbours = 2;
+  /// Near-duplicates are skipped only once the first round of the merge found at
+  /// least this many loops between the same two trajectories (sparse ties keep
+  /// every loop; the dense ones of robots not yet placed are thinned). 0 = always.
+  int duplicate_min_pair_loops = 0;
 
   MapManagerParams() { pcm.min_clique_size = 3; }
   Status read(const Config& config, const std::string& prefix = "server.");
