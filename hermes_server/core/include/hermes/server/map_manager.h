@@ -75,7 +75,7 @@ struct MapManagerParams {
   /// Near-duplicates are skipped only once the first round of the merge found at
   /// least this many loops between the same two trajectories (sparse ties keep
   /// every loop; the dense ones of robots not yet placed are thinned). 0 = always.
-  int duplicate_min_pair_loops = 0;
+  int duplicate_min_pair_loops = 6;
 
   MapManagerParams() { pcm.min_clique_size = 3; }
   Status read(const Config& config, const std::string& prefix = "server.");
