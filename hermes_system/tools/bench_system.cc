@@ -83,6 +83,9 @@ const char* kUsage =
     "                   With --duration S, each robot flies only its first S seconds\n"
     "                   (a quick check of the set-up).\n"
     "  --out DIR        --full's store folder (see above)\n"
+    "  --run-out DIR    also write each run's outputs as `hermes run` does (metrics.json,\n"
+    "                   loops.csv, loop_attempts.csv but for false_candidates, ...) to\n"
+    "                   DIR/<variant>_<robots> (--swarm only; --full keeps them in --out)\n"
     "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
 
 std::vector<std::string> split(const std::string& s) {
@@ -209,12 +212,23 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   if (!run.ok()) return Error{run.error()};
   std::size_t injected = 0;
   if (v == "false_candidates") injectFalseCandidates(**run, 0.2, &injected);
+  std::vector<server::LoopAttempt> attempts;
+  if (!out_dir.empty() && v != "false_candidates")  // that variant's hook holds the one slot
+    (*run)->onServerCreated([&attempts](server::Server& srv) {
+      srv.mapManager().setAttemptHook([&attempts](const server::LoopAttempt& a) { attempts.push_back(a); });
+    });
   const auto t0 = std::chrono::steady_clock::now();
   if (Status s = (*run)->run(progress); !s) return Error{s.error()};
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const system::RunResults r = system::evaluateRun(**run);
-  if (!out_dir.empty())
-    if (Status s = system::writeRunResults(**run, r, out_dir); !s) return Error{s.error()};
+  if (!out_dir.empty()) {  // the run's own outputs, as `hermes run` writes them
+    std::error_code mk;
+    fs::create_directories(out_dir, mk);
+    if (Status w = system::writeRunResults(**run, r, out_dir); !w) return Error{w.error()};
+    if (v != "false_candidates")
+      if (Status w = system::writeLoopAttempts(**run, attempts, (fs::path(out_dir) / "loop_attempts.csv").string()); !w)
+        return Error{w.error()};
+  }
   nlohmann::json j = system::resultsJson(r);
   j["variant"] = v;
   j["agents"] = robots.size();
@@ -399,6 +413,7 @@ int main(int argc, char** argv) {
   std::string json_out;
   std::vector<std::string> swarm;
   std::string swarm_bw = "50";
+  std::string run_out;
   std::string swarm_data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
   std::vector<std::string> swarm_seqs =
       split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult");
@@ -434,6 +449,8 @@ int main(int argc, char** argv) {
       swarm = split(next());
     } else if (a == "--swarm-bandwidth") {
       swarm_bw = next();
+    } else if (a == "--run-out") {
+      run_out = next();
     } else if (a == "--swarm-data") {
       swarm_data = next();
     } else if (a == "--swarm-sequences") {
@@ -465,6 +482,8 @@ int main(int argc, char** argv) {
     return std::fprintf(stderr, "hermes_bench_system: --full and --swarm are two different tables; give one\n"), 2;
   if (!full_out.empty() && full.empty())
     return std::fprintf(stderr, "hermes_bench_system: --out is --full's store folder; give --full too\n"), 2;
+  if (!run_out.empty() && swarm.empty())
+    return std::fprintf(stderr, "hermes_bench_system: --run-out belongs to --swarm (--full keeps every run in --out)\n"), 2;
   if (!full.empty())
     return runFull(full, variants, bandwidths, variants_given, bandwidths_given, rate,
                    duration_given ? duration : 0, full_out, overrides, json_out);
@@ -485,7 +504,8 @@ int main(int argc, char** argv) {
       auto robots = swarmRobots(swarm_data, swarm_seqs, views, duration, rate, std::atoi(n.c_str()));
       if (!robots.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", robots.error().c_str()), 1;
       for (const std::string& v : variants) {
-        auto j = runVariant(v, swarm_bw, *robots, overrides, nullptr, "");
+        auto j = runVariant(v, swarm_bw, *robots, overrides, nullptr,
+                            run_out.empty() ? "" : (fs::path(run_out) / (v + "_" + n)).string());
         if (!j.ok()) return std::fprintf(stderr, "%s\n", j.error().c_str()), 1;
         printSwarmRow(v, *j);
         runs.push_back(*j);

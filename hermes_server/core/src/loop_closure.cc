@@ -99,6 +99,7 @@ const char* toString(LoopStatus status) {
     case LoopStatus::kRansacFailed: return "ransac_failed";
     case LoopStatus::kTooFewInliers: return "too_few_inliers";
     case LoopStatus::kDegenerate: return "degenerate";
+    case LoopStatus::kSkippedDuplicate: return "skipped_duplicate";
   }
   return "unknown";
 }

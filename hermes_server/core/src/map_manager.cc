@@ -6,6 +6,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
+#include <iterator>
+#include <map>
 
 namespace hermes {
 namespace server {
@@ -35,7 +38,9 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"spatial_candidates", &spatial_candidates},
                    IntKey{"optimize_every_submaps", &optimize_every_submaps},
                    IntKey{"min_world_loops", &min_world_loops},
-                   IntKey{"loop_threads", &loop_threads}})
+                   IntKey{"loop_threads", &loop_threads},
+                   IntKey{"duplicate_neighbours", &duplicate_neighbours},
+                   IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
   for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
@@ -62,6 +67,8 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "spatial_max_angle_deg", spatial_max_angle_deg);
   out.set(p + "min_world_loops", min_world_loops);
   out.set(p + "loop_threads", loop_threads);
+  out.set(p + "duplicate_neighbours", duplicate_neighbours);
+  out.set(p + "duplicate_min_pair_loops", duplicate_min_pair_loops);
 }
 
 Status MapManagerParams::validate() const {
@@ -76,6 +83,8 @@ Status MapManagerParams::validate() const {
   if (Status s = refinement.validate(); !s) return Error{"refinement: " + s.error()};
   if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
   if (loop_threads < 1 || loop_threads > 64) return Error{"loop_threads must be in 1..64"};
+  if (duplicate_neighbours < 0) return Error{"duplicate_neighbours must be >= 0"};
+  if (duplicate_min_pair_loops < 0) return Error{"duplicate_min_pair_loops must be >= 0"};
   return Status::Ok();
 }
 
@@ -284,17 +293,50 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
       jobs.push_back(LoopJob{key, c, true});
     }
   }
-  std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
-  for (const LoopJob& j : jobs)
-    if (j.candidate) pairs.emplace_back(j.query, j.candidate->key);
-  const std::vector<LoopClosureResult> results = verifyPairs(pairs);
-  std::size_t next = 0;
-  for (const LoopJob& j : jobs) {
+  // Near-duplicates wait for a second round: verified only when none of the
+  // closures they duplicate gave a loop.
+  const std::vector<std::vector<std::size_t>> dups = nearDuplicates(jobs);
+  std::vector<LoopClosureResult> results(jobs.size());
+  std::vector<char> skipped(jobs.size(), 0);
+  // First-round loops per (query trajectory, candidate trajectory).
+  using TrajPair = std::pair<std::pair<RobotId, std::uint32_t>, std::pair<RobotId, std::uint32_t>>;
+  const auto trajPair = [](const LoopJob& j) {
+    return TrajPair{{j.query.agent, j.query.session}, {j.candidate->key.agent, j.candidate->key.session}};
+  };
+  std::map<TrajPair, int> pair_loops;
+  for (int round = 0; round < 2; ++round) {
+    if (round == 1)
+      for (std::size_t i = 0; i < jobs.size(); ++i)
+        if (jobs[i].candidate && dups[i].empty() && results[i].ok()) ++pair_loops[trajPair(jobs[i])];
+    std::vector<std::size_t> which;
+    std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
+    for (std::size_t i = 0; i < jobs.size(); ++i) {
+      if (!jobs[i].candidate || dups[i].empty() != (round == 0)) continue;
+      if (round == 1 && pair_loops[trajPair(jobs[i])] >= params_.duplicate_min_pair_loops &&
+          std::any_of(dups[i].begin(), dups[i].end(), [&](std::size_t d) { return results[d].ok(); })) {
+        skipped[i] = 1;
+        continue;
+      }
+      which.push_back(i);
+      pairs.emplace_back(jobs[i].query, jobs[i].candidate->key);
+    }
+    std::vector<LoopClosureResult> verified = verifyPairs(pairs);
+    for (std::size_t k = 0; k < which.size(); ++k) results[which[k]] = std::move(verified[k]);
+  }
+  for (std::size_t i = 0; i < jobs.size(); ++i) {
+    const LoopJob& j = jobs[i];
     if (!j.candidate) {
       if (attempt_hook_) attempt_hook_(LoopAttempt{j.query, std::nullopt, false, LoopStatus::kBadInput, "", 0, 0});
       continue;
     }
-    const LoopClosureResult& r = results[next++];
+    if (skipped[i]) {
+      ++stats->loops_skipped_duplicate;
+      if (attempt_hook_)
+        attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, LoopStatus::kSkippedDuplicate,
+                                  "near-duplicate of a loop found in this merge", 0, 0});
+      continue;
+    }
+    const LoopClosureResult& r = results[i];
     ++stats->loops_attempted;
     if (attempt_hook_)
       attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, r.status, r.reason, r.num_matches,
@@ -307,6 +349,37 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
     e->id = next_loop_id_++;
     map_.loops.push_back(*e);
   }
+}
+
+int MapManager::positionOf(const KeyframeKey& key) const {
+  const TrajectoryMap* t = map_.trajectory(key.agent, key.session);
+  if (!t) return -1;
+  auto it = t->keyframes.find(key.id);
+  return it == t->keyframes.end() ? -1 : static_cast<int>(std::distance(t->keyframes.begin(), it));
+}
+
+std::vector<std::vector<std::size_t>> MapManager::nearDuplicates(const std::vector<LoopJob>& jobs) const {
+  std::vector<std::vector<std::size_t>> dups(jobs.size());
+  const int n = params_.duplicate_neighbours;
+  if (n <= 0) return dups;
+  std::vector<int> qpos(jobs.size(), -1), cpos(jobs.size(), -1);
+  for (std::size_t i = 0; i < jobs.size(); ++i)
+    if (jobs[i].candidate) qpos[i] = positionOf(jobs[i].query), cpos[i] = positionOf(jobs[i].candidate->key);
+  const auto sameTraj = [](const KeyframeKey& a, const KeyframeKey& b) {
+    return a.agent == b.agent && a.session == b.session;
+  };
+  std::vector<std::size_t> first;  // first-round jobs so far
+  for (std::size_t i = 0; i < jobs.size(); ++i) {
+    if (!jobs[i].candidate || qpos[i] < 0 || cpos[i] < 0) continue;
+    for (std::size_t f : first) {
+      const LoopJob &a = jobs[f], &b = jobs[i];
+      if (sameTraj(a.query, b.query) && sameTraj(a.candidate->key, b.candidate->key) &&
+          std::abs(qpos[f] - qpos[i]) <= n && std::abs(cpos[f] - cpos[i]) <= n)
+        dups[i].push_back(f);
+    }
+    if (dups[i].empty()) first.push_back(i);
+  }
+  return dups;
 }
 
 std::vector<KeyframeKey> MapManager::spatialCandidates(const KeyframeKey& key, double stamp,

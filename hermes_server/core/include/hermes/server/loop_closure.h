@@ -113,6 +113,7 @@ enum class LoopStatus {
   kRansacFailed,
   kTooFewInliers,
   kDegenerate,
+  kSkippedDuplicate,  ///< not verified: a near-duplicate of a loop found in the same merge (map.duplicate_neighbours)
 };
 const char* toString(LoopStatus status);
 

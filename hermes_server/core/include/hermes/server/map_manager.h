@@ -67,6 +67,17 @@ struct MapManagerParams {
   /// order chosen, so the loops (and their ids) are the same for any count.
   /// 1 = in the merging thread (synchronous).
   int loop_threads = 2;
+  /// Near-duplicate closures: two closures of one merge whose query keyframes
+  /// are at most this many stored keyframes apart on one trajectory and whose
+  /// candidates are too (their rigs share keyframes: adjacent query keyframes
+  /// propose nearly the same place). The first in order is verified; the later
+  /// ones only when none of the first ones they duplicate gave a loop (two
+  /// rounds, so the loops are the same for any loop_threads). 0 = verify all.
+  int duplicate_neighbours = 2;
+  /// Near-duplicates are skipped only once the first round of the merge found at
+  /// least this many loops between the same two trajectories (sparse ties keep
+  /// every loop; the dense ones of robots not yet placed are thinned). 0 = always.
+  int duplicate_min_pair_loops = 6;
 
   MapManagerParams() { pcm.min_clique_size = 3; }
   Status read(const Config& config, const std::string& prefix = "server.");
@@ -82,6 +93,7 @@ struct MergeStats {
   int loops_replaced = 0;      ///< of those, measurements replaced (not fewer inliers)
   int place_candidates = 0;
   int loops_attempted = 0, loops_geometric = 0;
+  int loops_skipped_duplicate = 0;  ///< closures not verified: near-duplicates of a loop (duplicate_neighbours)
   bool optimized = false;
   bool refined = false;        ///< the map refinement ran around this merge's new loops
 };
@@ -191,6 +203,11 @@ class MapManager {
     std::optional<PlaceCandidate> candidate;
     bool spatial = false;
   };
+  /// Position of a stored keyframe in its trajectory (-1 if not stored).
+  int positionOf(const KeyframeKey& key) const;
+  /// For each job, the earlier first-round jobs it is a near-duplicate of
+  /// (duplicate_neighbours); empty = verified in the first round.
+  std::vector<std::vector<std::size_t>> nearDuplicates(const std::vector<LoopJob>& jobs) const;
   /// Place recognition for the newly stored keyframes (in order), then loop
   /// closure of all their candidates on loop_threads threads.
   void detectLoops(const std::vector<KeyframeKey>& added, MergeStats* stats);

@@ -1,0 +1,151 @@
+// Near-duplicate closures (server.map.duplicate_neighbours): within one merge,
+// a closure whose query and candidate keyframes each sit next to those of an
+// earlier closure that gave a loop (same two trajectories) is not verified;
+// one whose earlier twin gave no loop still is; with duplicate_min_pair_loops
+// only where the merge's first round tied the two trajectories that often.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <iostream>
+#include <iterator>
+
+#include "hermes/server/server.h"
+#include "support/multi_agent_fixture.h"
+
+namespace hermes {
+namespace server {
+namespace {
+
+const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+
+struct Seen {
+  KeyframeKey query, candidate;
+  int qpos = -1, cpos = -1;  ///< positions in their trajectories when tried
+  LoopStatus status = LoopStatus::kBadInput;
+  std::size_t merge = 0;     ///< which merge it belonged to
+};
+
+struct Trace {
+  std::vector<Seen> attempts;  ///< with a candidate
+  int verified = 0, skipped = 0;
+  std::size_t accepted = 0;
+  int merged = 0;
+};
+
+int position(const GlobalMap& map, const KeyframeKey& k) {
+  const TrajectoryMap* t = map.trajectory(k.agent, k.session);
+  if (!t) return -1;
+  auto it = t->keyframes.find(k.id);
+  return it == t->keyframes.end() ? -1 : static_cast<int>(std::distance(t->keyframes.begin(), it));
+}
+
+Trace run(const fixture::Fixture& fx, int duplicate_neighbours, int min_pair_loops = 0) {
+  ServerParams params;
+  params.map.duplicate_neighbours = duplicate_neighbours;
+  params.map.duplicate_min_pair_loops = min_pair_loops;
+  auto created = Server::create(params, HERMES_SOURCE_DIR);
+  EXPECT_TRUE(created.ok()) << created.error();
+  Server& server = **created;
+  Trace trace;
+  std::size_t merge = 0;
+  server.mapManager().setAttemptHook([&](const LoopAttempt& a) {
+    if (!a.candidate) return;
+    Seen s{a.query, a.candidate->key, position(server.map(), a.query),
+           position(server.map(), a.candidate->key), a.status, merge};
+    trace.attempts.push_back(s);
+    (a.status == LoopStatus::kSkippedDuplicate ? trace.skipped : trace.verified) += 1;
+  });
+  double now = 0;
+  for (std::size_t r = 0; r < fx.agents[0].frames.size() || r < fx.agents[1].frames.size(); ++r) {
+    for (const auto& agent : fx.agents) {
+      if (r >= agent.frames.size()) continue;
+      EXPECT_EQ(server.onFrame(agent.frames[r].data(), agent.frames[r].size(), nullptr, now += 1).verdict,
+                ArrivalVerdict::kAccept);
+      ++merge;  // one submap per process() call at most: merges are told apart by frame
+      server.process(now, -1);
+    }
+  }
+  EXPECT_EQ(server.counters().merge_errors, 0u) << server.counters().last_error;
+  trace.accepted = server.mapManager().loopsAccepted();
+  trace.merged = server.mapManager().agentsMerged();
+  return trace;
+}
+
+bool sameTrajectory(const KeyframeKey& a, const KeyframeKey& b) {
+  return a.agent == b.agent && a.session == b.session;
+}
+
+class DuplicateClosures : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    fixture::Options options;
+    options.keypoints = 200;
+    auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 15.0, -1},
+                                    {kGt + "MH_02_easy.txt", 0.0, 15.0, -1}},
+                                   options);
+    ASSERT_TRUE(fx.ok()) << fx.error();
+    off_ = new Trace(run(*fx, 0));
+    on_ = new Trace(run(*fx, 2));
+    sparse_ = new Trace(run(*fx, 2, 1000));
+  }
+  static void TearDownTestSuite() {
+    delete off_;
+    delete on_;
+    delete sparse_;
+  }
+  static Trace* off_;
+  static Trace* on_;
+  static Trace* sparse_;  ///< duplicate_min_pair_loops above any merge's loops
+};
+Trace* DuplicateClosures::off_ = nullptr;
+Trace* DuplicateClosures::on_ = nullptr;
+Trace* DuplicateClosures::sparse_ = nullptr;
+
+TEST_F(DuplicateClosures, FewerClosuresVerifiedSameRobotsMerged) {
+  ASSERT_TRUE(off_ && on_);
+  EXPECT_EQ(off_->skipped, 0);
+  EXPECT_GT(on_->skipped, 0);  // adjacent query keyframes do propose the same places
+  EXPECT_LT(on_->verified, off_->verified);
+  EXPECT_EQ(off_->merged, 2);
+  EXPECT_EQ(on_->merged, 2);
+  EXPECT_GE(on_->accepted, 3u);
+  std::cout << "[ info ] verified " << off_->verified << " -> " << on_->verified << " (skipped "
+            << on_->skipped << "), loops accepted " << off_->accepted << " -> " << on_->accepted
+            << "\n";
+}
+
+TEST_F(DuplicateClosures, OnlyNeighboursOfALoopOfTheSameMergeAreSkipped) {
+  ASSERT_TRUE(on_);
+  const auto& at = on_->attempts;
+  for (std::size_t i = 0; i < at.size(); ++i) {
+    if (at[i].status != LoopStatus::kSkippedDuplicate) continue;
+    bool twin = false;
+    for (std::size_t j = 0; j < i && !twin; ++j)
+      twin = at[j].merge == at[i].merge && at[j].status == LoopStatus::kAccepted &&
+             sameTrajectory(at[j].query, at[i].query) &&
+             sameTrajectory(at[j].candidate, at[i].candidate) &&
+             std::abs(at[j].qpos - at[i].qpos) <= 2 && std::abs(at[j].cpos - at[i].cpos) <= 2;
+    EXPECT_TRUE(twin) << "skipped attempt " << i << " has no earlier loop next to it";
+  }
+}
+
+TEST_F(DuplicateClosures, PairsWithFewLoopsInTheMergeKeepEveryClosure) {
+  ASSERT_TRUE(off_ && sparse_);
+  EXPECT_EQ(sparse_->skipped, 0);
+  EXPECT_EQ(sparse_->verified, off_->verified);
+  EXPECT_EQ(sparse_->accepted, off_->accepted);
+}
+
+TEST(DuplicateClosuresParams, NegativeIsRejected) {
+  MapManagerParams p;
+  p.duplicate_neighbours = -1;
+  EXPECT_FALSE(p.validate().ok());
+  p.duplicate_neighbours = 0;
+  EXPECT_TRUE(p.validate().ok());
+  p.duplicate_min_pair_loops = -1;
+  EXPECT_FALSE(p.validate().ok());
+}
+
+}  // namespace
+}  // namespace server
+}  // namespace hermes
