@@ -96,16 +96,21 @@ struct TieConsistency {
 TieConsistency measureLoopTies(const GlobalMap& map, double max_reproj_px = 50.0);
 
 namespace detail {
+/// p_C = R^T (p_W - t) for the camera T_W_C = (q (Eigen x,y,z,w), t).
+template <typename T>
+Eigen::Matrix<T, 3, 1> pointInCamera(const T* q, const T* t, const T* p) {
+  const Eigen::Map<const Eigen::Quaternion<T>> q_W_C(q);
+  return q_W_C.conjugate() *
+         (Eigen::Map<const Eigen::Matrix<T, 3, 1>>(p) - Eigen::Map<const Eigen::Matrix<T, 3, 1>>(t));
+}
+
 /// Reprojection residual of world point p_W in camera T_W_C = (q, t):
 /// (project(R^T (p_W - t)) - uv) / sigma. Parameters q (Eigen x,y,z,w), t, p_W.
 struct ReprojectionCost {
   double u, v, fx, fy, cx, cy, inv_sigma;
   template <typename T>
   bool operator()(const T* q, const T* t, const T* p, T* r) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> q_W_C(q);
-    const Eigen::Matrix<T, 3, 1> p_C =
-        q_W_C.conjugate() * (Eigen::Map<const Eigen::Matrix<T, 3, 1>>(p) -
-                             Eigen::Map<const Eigen::Matrix<T, 3, 1>>(t));
+    const Eigen::Matrix<T, 3, 1> p_C = pointInCamera(q, t, p);
     if (p_C.z() < T(1e-6)) {  // behind the camera: a large, smooth penalty
       r[0] = r[1] = T(1e3);
       return true;
@@ -121,10 +126,7 @@ struct InverseDepthCost {
   double inv_depth, fb, inv_sigma;
   template <typename T>
   bool operator()(const T* q, const T* t, const T* p, T* r) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> q_W_C(q);
-    const Eigen::Matrix<T, 3, 1> p_C =
-        q_W_C.conjugate() * (Eigen::Map<const Eigen::Matrix<T, 3, 1>>(p) -
-                             Eigen::Map<const Eigen::Matrix<T, 3, 1>>(t));
+    const Eigen::Matrix<T, 3, 1> p_C = pointInCamera(q, t, p);
     if (p_C.z() < T(1e-6)) {
       r[0] = T(1e3);
       return true;
