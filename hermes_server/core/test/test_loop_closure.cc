@@ -143,6 +143,17 @@ GeneralizedCorrespondences makeBearings(const Scene& s, std::mt19937& rng, int n
   return out;
 }
 
+/// The same correspondences solved with one gate of `params` set to `off`, then to `on`.
+template <typename T>
+std::pair<LoopClosureResult, LoopClosureResult> solveOffOn(const GeneralizedCorrespondences& corr,
+                                                           LoopClosureParams params,
+                                                           T LoopClosureParams::*gate, T off, T on) {
+  params.*gate = off;
+  LoopClosureResult r_off = solveGeneralizedRelativePose(corr, params);
+  params.*gate = on;
+  return {std::move(r_off), solveGeneralizedRelativePose(corr, params)};
+}
+
 void expectPose(const SE3& est, const SE3& truth, double max_t, double max_r_deg) {
   EXPECT_LT(translationalDistance(est, truth), max_t)
       << "est t " << est.translation().transpose() << " truth " << truth.translation().transpose();
@@ -198,10 +209,7 @@ TEST(LoopClosure, HopelessCandidateGivesUpEarly) {
   LoopClosureParams params;
   params.prefilter_pairs = false;  // all 400 random matches reach the 17-point RANSAC
   params.min_inlier_ratio = 0;     // only min_inliers decides what is needed
-  params.ransac_hopeless_iterations = 0;
-  const LoopClosureResult full = solveGeneralizedRelativePose(junk, params);
-  params.ransac_hopeless_iterations = 100;
-  const LoopClosureResult early = solveGeneralizedRelativePose(junk, params);
+  const auto [full, early] = solveOffOn(junk, params, &LoopClosureParams::ransac_hopeless_iterations, 0, 100);
   EXPECT_FALSE(full.ok());
   EXPECT_EQ(full.ransac_enough_at, -1);
   EXPECT_GT(full.ransac_iterations, 1000);  // no model: it runs to the cap
@@ -217,10 +225,8 @@ TEST(LoopClosure, HopelessGateKeepsTrueLoopsBitForBit) {
     const GeneralizedCorrespondences corr = makeBearings(s, rng, 240, 0.3, 0.5);
     LoopClosureParams params;
     params.max_translation_sigma_m = 0.1;  // 240 bearings: sigma ~5 cm
-    params.ransac_hopeless_iterations = 0;
-    const LoopClosureResult off = solveGeneralizedRelativePose(corr, params);
+    const auto [off, on] = solveOffOn(corr, params, &LoopClosureParams::ransac_hopeless_iterations, 0, 100);
     params.ransac_hopeless_iterations = 100;
-    const LoopClosureResult on = solveGeneralizedRelativePose(corr, params);
     const LoopClosureResult again = solveGeneralizedRelativePose(corr, params);
     ASSERT_TRUE(off.ok()) << off.reason;
     ASSERT_TRUE(on.ok()) << on.reason;
@@ -312,10 +318,7 @@ TEST(LoopClosure, SigmaPrecheckRejectsOnlyWhatTheRefinementWould) {
     const Scene s = shortBaselineScene(rng);
     GeneralizedCorrespondences bare = makeBearings(s, rng, 200, 0.3, 1.0);
     LoopClosureParams params;
-    params.sigma_precheck_factor = 0;
-    const LoopClosureResult off = solveGeneralizedRelativePose(bare, params);
-    params.sigma_precheck_factor = 1.5;
-    const LoopClosureResult on = solveGeneralizedRelativePose(bare, params);
+    const auto [off, on] = solveOffOn(bare, params, &LoopClosureParams::sigma_precheck_factor, 0.0, 1.5);
     std::printf("precheck seed %d: off %s (%s), on %s (%s)\n", seed, toString(off.status),
                 off.reason.c_str(), toString(on.status), on.reason.c_str());
     if (on.reason.find("before the bundle adjustment") != std::string::npos) {
@@ -334,10 +337,7 @@ TEST(LoopClosure, SigmaPrecheckRejectsOnlyWhatTheRefinementWould) {
     const GeneralizedCorrespondences corr = makeBearings(s, rng, 240, 0.3, 0.5, 0.3);
     LoopClosureParams params;
     params.max_translation_sigma_m = 0.1;  // 240 bearings: sigma ~5 cm
-    params.sigma_precheck_factor = 0;
-    const LoopClosureResult off = solveGeneralizedRelativePose(corr, params);
-    params.sigma_precheck_factor = 1.5;
-    const LoopClosureResult on = solveGeneralizedRelativePose(corr, params);
+    const auto [off, on] = solveOffOn(corr, params, &LoopClosureParams::sigma_precheck_factor, 0.0, 1.5);
     ASSERT_TRUE(off.ok()) << off.reason;
     ASSERT_TRUE(on.ok()) << on.reason;
     EXPECT_TRUE(on.T_refQ_refC.matrix().isApprox(off.T_refQ_refC.matrix(), 0)) << "seed " << seed;
