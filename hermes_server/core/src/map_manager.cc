@@ -675,7 +675,8 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
   stats.keyframes = static_cast<int>(added.size());
   stats.landmarks = static_cast<int>(submap.landmarks.size());
   const std::size_t loops_before = map_.loops.size();
-  const std::set<std::uint64_t> accepted_before = accepted_;
+  std::set<std::uint64_t> accepted_before;  // only the refinement needs them (a copy per merge)
+  if (params_.refinement.enabled) accepted_before = accepted_;
   extendKeyframes(extended, &stats);
   detectLoops(added, &stats);
   if (stats.loops_replaced > 0) graph_dirty_ = true;  // a loop's measurement changed
