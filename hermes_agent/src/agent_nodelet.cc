@@ -640,6 +640,9 @@ class AgentNodelet : public nodelet::Nodelet {
     if (!pipeline_) return;
     const double now = ros::WallTime::now().toSec();
     pipeline_->pollUplink(now);
+    // The window worker may submit after the call that queued its step (a retry
+    // after the last frame): recorded here, or uplink_status would never list it.
+    noteSubmitted();
     // After the sequence no window step runs: a deferred window is retried here.
     if (done_ && pipeline_->hasCarriedWindow() &&
         now - last_retry_ >= params_.tracker.window.period_s) {
