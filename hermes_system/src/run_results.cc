@@ -188,6 +188,7 @@ RunResults evaluateRun(const OfflineRun& run) {
   m.frames_refused = sm.frames_refused;
   m.relocalised = sm.relocalised;
   m.robots_new = sm.robots_new;
+  m.loops_bridged = sm.loops_bridged;
   TimingStats timings = srv.timings();
   const eval::EvalParams& ep = run.params().run.eval;
   std::vector<eval::AgentTrajectories> merged;

@@ -146,6 +146,7 @@ void to_json(json& j, const RunMetrics& m) {
   if (!m.frames_refused.empty()) j["frames_refused"] = m.frames_refused;
   if (m.relocalised) j["relocalised"] = *m.relocalised;
   if (m.robots_new) j["robots_new"] = *m.robots_new;
+  if (m.loops_bridged) j["loops_bridged"] = *m.loops_bridged;
 }
 
 // ---------------------------------------------------------------- reading
@@ -294,6 +295,7 @@ RunMetrics parseRun(const json& j) {
   m.agents_merged = r.integer("agents_merged", true);
   m.relocalised = r.integer("relocalised", false);
   m.robots_new = r.integer("robots_new", false);
+  m.loops_bridged = r.integer("loops_bridged", false);
   const json* timings = r.get("timings_ms", true);
   ObjectReader tr(*timings, "timings_ms");
   for (const auto& [stage, v] : timings->items()) {

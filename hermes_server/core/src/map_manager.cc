@@ -462,21 +462,17 @@ void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, Merge
 
 void MapManager::runPcm() {
   std::vector<LoopCandidate> candidates;
-  for (const LoopEdge& e : map_.loops) {
-    LoopCandidate c;
-    c.id = e.id;
-    c.a = e.a;
-    c.b = e.b;
-    c.T_a_b = e.T_a_b;
-    c.covariance = e.covariance;
-    candidates.push_back(c);
-  }
+  for (const LoopEdge& e : map_.loops) candidates.push_back(loopCandidate(e));
   if (chain_.revision() != pcm_chain_revision_) {
     pcm_cache_.clear();
     pcm_chain_revision_ = chain_.revision();
   }
   const PcmResult r = selectConsistentLoops(candidates, chain_.query(), params_.pcm, &pcm_cache_);
   std::set<std::uint64_t> accepted(r.accepted.begin(), r.accepted.end());
+  // Loops that no pair holds enough of, consistent across tied groups (group_bridge.h).
+  const BridgeResult b = bridgeTieGroups(candidates, accepted, chain_.query(), params_.pcm);
+  accepted.insert(b.accepted.begin(), b.accepted.end());
+  loops_bridged_ = static_cast<int>(b.accepted.size());
   for (LoopEdge& e : map_.loops) {
     const bool now = accepted.count(e.id) > 0;
     if (now != e.accepted) touched_.insert(e.a), touched_.insert(e.b);
@@ -538,6 +534,7 @@ bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibili
       changed = true;
     }
   }
+  std::optional<TieGroups> ties;  // of the accepted loops, built when a trajectory needs them
   for (bool progress = true; progress;) {
     progress = false;
     for (auto& [tid, t] : map_.trajectories) {
@@ -555,6 +552,16 @@ bool MapManager::updateAnchoring(const std::function<double(RobotId)>& credibili
         const StoredKeyframe* mine = map_.keyframe(a_here ? e.a : e.b);
         const SE3 T_W_Cmine = a_here ? ok->T_W_C * e.T_a_b.inverse() : ok->T_W_C * e.T_a_b;
         estimates.push_back(T_W_Cmine * mine->keyframe.T_A_C.inverse());
+      }
+      if (static_cast<int>(estimates.size()) < params_.min_world_loops) {
+        // Too few of its own: those of its tie group's other members (bridged groups).
+        if (!ties) {
+          ties.emplace(chain_.query());
+          for (const LoopEdge& e : map_.loops)
+            if (e.accepted) ties->tie(loopCandidate(e));
+        }
+        const std::vector<SE3> more = groupAnchorEstimates(map_, *ties, t);
+        estimates.insert(estimates.end(), more.begin(), more.end());
       }
       if (static_cast<int>(estimates.size()) < params_.min_world_loops) continue;
       // Medoid of the estimates (robust to a residual bad loop).

@@ -29,8 +29,9 @@ struct IdRange {
   bool overlaps(const IdRange& o) const { return lo <= o.hi && o.lo <= hi; }
 };
 
-/// The loop seen from b: T_b_a with the covariance of its right perturbation.
-LoopCandidate reversed(const LoopCandidate& l) {
+}  // namespace
+
+LoopCandidate reversedLoop(const LoopCandidate& l) {
   LoopCandidate r = l;
   r.a = l.b;
   r.b = l.a;
@@ -40,8 +41,6 @@ LoopCandidate reversed(const LoopCandidate& l) {
   return r;
 }
 
-}  // namespace
-
 Status PcmParams::read(const Config& config, const std::string& prefix) {
   const std::string p = prefix + ".";
   for (Status s : {config.get(p + "chi2_probability", &chi2_probability),
@@ -50,7 +49,8 @@ Status PcmParams::read(const Config& config, const std::string& prefix) {
                    config.get(p + "max_segments", &max_segments),
                    config.get(p + "min_segment_size", &min_segment_size),
                    config.get(p + "drift_fraction", &drift_fraction),
-                   config.get(p + "drift_rad_per_m", &drift_rad_per_m)}) {
+                   config.get(p + "drift_rad_per_m", &drift_rad_per_m),
+                   config.get(p + "bridge_min_loops", &bridge_min_loops)}) {
     if (!s) return s;
   }
   if (Status s = validate(); !s) return Error{prefix + ": " + s.error()};
@@ -65,6 +65,7 @@ void PcmParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(prefix + ".min_segment_size", min_segment_size);
   w->set(prefix + ".drift_fraction", drift_fraction);
   w->set(prefix + ".drift_rad_per_m", drift_rad_per_m);
+  w->set(prefix + ".bridge_min_loops", bridge_min_loops);
 }
 
 Status PcmParams::validate() const {
@@ -75,6 +76,7 @@ Status PcmParams::validate() const {
   if (min_segment_size < 1) return Error{"min_segment_size must be >= 1"};
   if (!(drift_fraction >= 0 && drift_fraction < 1)) return Error{"drift_fraction must be in [0, 1)"};
   if (!(drift_rad_per_m >= 0 && drift_rad_per_m < 1)) return Error{"drift_rad_per_m must be in [0, 1)"};
+  if (bridge_min_loops < 0) return Error{"bridge_min_loops must be >= 0 (0 = off)"};
   return Status::Ok();
 }
 
@@ -218,7 +220,7 @@ PcmResult selectConsistentLoops(const std::vector<LoopCandidate>& loops,
   // Group by unordered trajectory pair; orient every loop from the smaller trajectory.
   std::map<std::pair<TrajectoryId, TrajectoryId>, std::vector<LoopCandidate>> groups;
   for (const LoopCandidate& l : loops) {
-    const LoopCandidate o = trajectoryOf(l.b) < trajectoryOf(l.a) ? reversed(l) : l;
+    const LoopCandidate o = trajectoryOf(l.b) < trajectoryOf(l.a) ? reversedLoop(l) : l;
     groups[{trajectoryOf(o.a), trajectoryOf(o.b)}].push_back(o);
   }
   res.groups = static_cast<int>(groups.size());

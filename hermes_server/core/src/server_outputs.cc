@@ -177,6 +177,7 @@ RunMetrics mergeMetrics(const Server& server) {
   const MapManager& mm = server.mapManager();
   m.loops_accepted = static_cast<int64_t>(mm.loopsAccepted());
   m.loops_rejected = static_cast<int64_t>(mm.loopsRejected());
+  m.loops_bridged = mm.loopsBridged();
   m.timings_ms = server.timings().summary();
   return m;
 }

@@ -121,6 +121,7 @@ struct RunMetrics {
   /// Server: sessions re-localised / reported as new robots, over all robots
   /// (per_agent relocalised / reported_new summed).
   std::optional<int64_t> relocalised, robots_new;
+  std::optional<int64_t> loops_bridged;  ///< of loops_accepted, bridging tie groups (group_bridge.h)
 };
 
 void to_json(nlohmann::json& j, const RunMetrics& m);

@@ -21,6 +21,7 @@
 #include "hermes/core/odometry_noise.h"
 #include "hermes/server/bookkeeper.h"
 #include "hermes/server/global_map.h"
+#include "hermes/server/group_bridge.h"
 #include "hermes/server/loop_closure.h"
 #include "hermes/server/map_refinement.h"
 #include "hermes/server/pcm.h"
@@ -170,6 +171,8 @@ class MapManager {
   std::vector<const Keyframe*> neighbours(const KeyframeKey& key, std::vector<PinholeIntrinsics>* cams) const;
   std::size_t loopsAccepted() const;
   std::size_t loopsRejected() const;
+  /// Of the accepted, those bridging tie groups (group_bridge.h; latest PCM run).
+  int loopsBridged() const { return loops_bridged_; }
   bool hasLoops(RobotId robot) const;
   /// Agents (current sessions) anchored in the world frame (reads the
   /// bookkeeper: with a bookkeeper lock, call with it held).
@@ -252,6 +255,7 @@ class MapManager {
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;
   std::set<std::uint64_t> accepted_;
+  int loops_bridged_ = 0;  ///< of accepted_, by bridging tie groups (latest PCM run)
   /// Graph nodes changed since the last solve: new keyframes, ends of loops
   /// accepted / dropped / re-measured, keyframes of newly anchored robots.
   std::set<KeyframeKey> touched_;

@@ -57,6 +57,10 @@ struct PcmParams {
   int min_segment_size = 3;        ///< loops a clique beyond the first needs at least
   double drift_fraction = 0.01;    ///< [m/m] translation drift allowed per metre of odometry (0 = none)
   double drift_rad_per_m = 0.001;  ///< [rad/m] rotation drift allowed per metre of odometry
+  /// Loops between two groups of tied trajectories accepted together when at
+  /// least this many are consistent through the groups' ties, over at least two
+  /// trajectory pairs (group_bridge.h); 0 = off.
+  int bridge_min_loops = 3;
 
   Status read(const Config& config, const std::string& prefix);
   void write(ConfigWriter* writer, const std::string& prefix) const;
@@ -163,6 +167,9 @@ Expected<double> cycleMahalanobis2(const LoopCandidate& i, const LoopCandidate& 
 
 /// The drift allowance added to the covariance of odometry over `path_length_m`.
 Mat6 driftAllowance(double path_length_m, const PcmParams& params);
+
+/// The loop seen from b: T_b_a with the covariance of its right perturbation.
+LoopCandidate reversedLoop(const LoopCandidate& loop);
 
 /// Quantile of the chi-square distribution (probability p, dof degrees of freedom).
 double chi2Quantile(double p, int dof);
