@@ -19,6 +19,13 @@
 // are held and put on the link afterwards in the order one thread would have
 // sent them (frame stamp, then agent index). Same results for any thread count.
 //
+// Tracking record / replay (system.tracking_record_dir / tracking_replay_dir,
+// tracking_record.h): tracking does not depend on the link, the server or the
+// distiller, so a run can write every agent's tracking to a file and a later
+// run of the same sequences (any variant, any bandwidth) replays it instead of
+// loading and tracking images: same frames on the same clock, the same window
+// step from the recorded windows on. Same results as tracking live.
+//
 // Scenario runs (link.scenario, scenario.h): instead of the one shared link, a
 // link per robot to the server and between robots (RelayNetwork): robots out of
 // the server's reach hand their submaps to a relay robot (relay.*).
