@@ -25,6 +25,7 @@ system::SystemParams params(const std::string& strategy) {
   p.link.bandwidth_mbitps = 2;  // the distiller has to choose
   if (!strategy.empty()) p.run.agent.distill.strategy = strategy;  // "": Hermes (the default)
   // No wall-clock limit that binds: the selections depend on nothing but the input.
+  p.run.agent.distill.milp_time_limit_s = 60;
   p.run.agent.distill.trim_time_limit_s = 60;
   return p;
 }
