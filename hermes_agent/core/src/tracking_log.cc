@@ -25,6 +25,10 @@ struct Out {
     const auto* p = reinterpret_cast<const std::uint8_t*>(&v);
     b->insert(b->end(), p, p + sizeof(T));
   }
+  template <class... T>
+  void all(const T&... v) {
+    (put(v), ...);
+  }
   void count(std::size_t n) { put(static_cast<std::uint64_t>(n)); }
   void text(const std::string& s) {
     put(static_cast<std::uint32_t>(s.size()));
@@ -51,11 +55,7 @@ void putMotion(Out& o, const distill::MotionHint& m) {
 }
 
 void putSubmap(Out& o, const Submap& s) {
-  o.put(s.header.agent);
-  o.put(s.header.session);
-  o.put(s.header.seq);
-  o.put(s.header.t_start);
-  o.put(s.header.t_end);
+  o.all(s.header.agent, s.header.session, s.header.seq, s.header.t_start, s.header.t_end);
   o.count(s.cameras.size());
   for (const PinholeIntrinsics& K : s.cameras) {
     for (double v : {K.fx, K.fy, K.cx, K.cy}) o.put(v);
@@ -64,18 +64,11 @@ void putSubmap(Out& o, const Submap& s) {
   }
   o.count(s.keyframes.size());
   for (const Keyframe& kf : s.keyframes) {
-    o.put(kf.id);
-    o.put(kf.stamp);
+    o.all(kf.id, kf.stamp);
     o.pose(kf.T_A_C);
-    o.put(kf.camera_id);
-    o.put(static_cast<std::uint8_t>(kf.lost_before));
+    o.all(kf.camera_id, static_cast<std::uint8_t>(kf.lost_before));
     o.count(kf.keypoints.size());
-    for (const Keypoint& k : kf.keypoints) {
-      o.put(k.u);
-      o.put(k.v);
-      o.put(k.octave);
-      o.put(k.depth);
-    }
+    for (const Keypoint& k : kf.keypoints) o.all(k.u, k.v, k.octave, k.depth);
     o.count(kf.descriptors.size());
     for (const Descriptor& d : kf.descriptors) o.put(d);
     o.count(kf.keypoint_landmark.size());
