@@ -85,7 +85,7 @@ const char* kUsage =
     "                   (a quick check of the set-up).\n"
     "  --out DIR        --full's store folder (see above)\n"
     "  --tracking-dir D --full: the first run records every robot's tracking in D (default\n"
-    "                   OUT/tracking, not in git; ~100 MB per robot for whole sequences),\n"
+    "                   OUT/tracking, not in git; ~50 MB per robot over whole V1),\n"
     "                   the later runs replay it instead of tracking the images (same\n"
     "                   results, a fraction of the time); a recording made for other\n"
     "                   sequences or tracker settings is recorded again. Each run's\n"
