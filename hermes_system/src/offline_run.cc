@@ -10,6 +10,7 @@
 
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/server/server_outputs.h"
+#include "hermes/system/tracking_record.h"
 
 namespace hermes::system {
 namespace fs = std::filesystem;
@@ -58,14 +59,23 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     OfflineAgent a;
     a.name = src.name;
     a.frames = src.max_frames > 0 ? std::min(src.max_frames, info.frame_count) : info.frame_count;
-    auto first = loadCameraFrame(*src.dataset, 0);
-    if (!first.ok()) return Error{"agent " + src.name + ": frame 0: " + first.error()};
-    a.clock_offset = first->stamp;
+    if (params.clock.tracking_replay_dir.empty()) {
+      auto first = loadCameraFrame(*src.dataset, 0);
+      if (!first.ok()) return Error{"agent " + src.name + ": frame 0: " + first.error()};
+      a.clock_offset = first->stamp;
+    } else {
+      a.clock_offset = src.dataset->frameTime(0);  // the stamp frame 0 carries; no image
+    }
     a.dataset = std::move(src.dataset);
     run->agents_.push_back(std::move(a));
     auto pipeline = run->makePipeline(i, /*fresh=*/true);
     if (!pipeline) return Error{pipeline.error()};
     run->agents_[i].pipeline = std::move(*pipeline);
+    const OfflineAgent& made = run->agents_[i];
+    if (Status s = setUpTrackingRecord(run->params_, made.name, *made.dataset, made.frames,
+                                       made.pipeline.get());
+        !s)
+      return Error{s.error()};
   }
   if (Status s = run->checkResets(); !s) return Error{s.error()};
   if (params.corrupt.active() &&
@@ -270,17 +280,24 @@ Status OfflineRun::feedAgent(std::size_t i, double t) {
     const double ts = a.dataset->frameTime(a.next) - a.clock_offset;
     if (ts > t) break;
     a.feeding_stamp = ts;
-    auto frame = loadCameraFrame(*a.dataset, a.next);
-    if (!frame.ok())
-      return Error{"agent " + a.name + ": frame " + std::to_string(a.next) + ": " + frame.error()};
-    auto r = a.pipeline->feed(*frame);
-    if (!r.ok()) return Error{"agent " + a.name + ": frame " + std::to_string(a.next) + ": " + r.error()};
+    const std::string what = "agent " + a.name + ": frame " + std::to_string(a.next) + ": ";
+    double stamp = 0;
+    if (a.pipeline->replaying()) {  // the recorded tracking of this frame, no image
+      stamp = a.dataset->frameTime(a.next);
+      if (auto r = a.pipeline->replayFrame(stamp); !r.ok()) return Error{what + r.error()};
+    } else {
+      auto frame = loadCameraFrame(*a.dataset, a.next);
+      if (!frame.ok()) return Error{what + frame.error()};
+      stamp = frame->stamp;
+      if (auto r = a.pipeline->feed(*frame); !r.ok()) return Error{what + r.error()};
+    }
     const Trajectory& odo = a.pipeline->trajectory();
-    if (!odo.empty() && odo.back().t == frame->stamp)
+    if (!odo.empty() && odo.back().t == stamp)
       if (const auto T_W_B = a.pipeline->globalPose().inWorld(odo.back().T_W_B))
-        a.global_track.push_back({frame->stamp, *T_W_B});
+        a.global_track.push_back({stamp, *T_W_B});
     if (++a.next == a.frames) {
       a.pipeline->flushWindow();  // the last, partial window
+      if (Status s = a.pipeline->finishTracking(); !s) return s;  // recording / replay
       a.next_retry = t + params_.run.agent.tracker.window.period_s;
     }
   }

@@ -97,7 +97,9 @@ Status ClockParams::read(const Config& c) {
                    c.get("system.drain_s", &drain_s),
                    c.get("system.agent_threads", &agent_threads),
                    c.get("system.server_restart_at", &server_restart_at),
-                   c.get("system.server_downtime_s", &server_downtime_s)})
+                   c.get("system.server_downtime_s", &server_downtime_s),
+                   c.get("system.tracking_record_dir", &tracking_record_dir),
+                   c.get("system.tracking_replay_dir", &tracking_replay_dir)})
     if (!s) return s;
   return validate();
 }
@@ -118,6 +120,11 @@ Status ClockParams::validate() const {
     if (r.agent.empty() || !(r.at_s >= 0) || !std::isfinite(r.at_s))
       return Error{"system.agent_reset: '" + formatAgentResets({r}) +
                    "' needs an agent name and a time >= 0 s"};
+  if (!tracking_record_dir.empty() && !tracking_replay_dir.empty())
+    return Error{"system.tracking_record_dir and system.tracking_replay_dir exclude each other"};
+  if ((!tracking_record_dir.empty() || !tracking_replay_dir.empty()) && !agent_reset.empty())
+    return Error{"system.tracking_record_dir / tracking_replay_dir: not with system.agent_reset "
+                 "(a reset tracks a fresh map)"};
   return Status::Ok();
 }
 
@@ -130,6 +137,8 @@ void ClockParams::write(ConfigWriter& w) const {
   w.set("system.server_restart_at", server_restart_at);
   w.set("system.server_downtime_s", server_downtime_s);
   w.set("system.agent_reset", formatAgentResets(agent_reset));
+  w.set("system.tracking_record_dir", tracking_record_dir);
+  w.set("system.tracking_replay_dir", tracking_replay_dir);
 }
 
 Status SystemParams::read(const Config& config) {

@@ -216,3 +216,32 @@ TEST(RunConfig, ShippedConfigsReadCleanly) {
   ASSERT_FALSE(p.ok());
   EXPECT_NE(p.error().find("tracker.min_trackd"), std::string::npos) << p.error();
 }
+
+TEST(RunCli, RecordThenReplayTracking) {
+  const std::string tracking = outDir("tracking_dir");
+  const std::string live = outDir("tracking_live"), replay = outDir("tracking_replay");
+  Outcome o = run("--dataset " + kMicro + " --out " + live + " --no-plots --max-frames 40 --record-tracking " +
+                      tracking, "track_rec");
+  ASSERT_EQ(o.code, 0) << o.err;
+  ASSERT_TRUE(fs::exists(tracking + "/euroc_V1_01_micro.htrk"));
+  o = run("--dataset " + kMicro + " --out " + replay + " --no-plots --max-frames 40 --replay-tracking " +
+              tracking, "track_replay");
+  ASSERT_EQ(o.code, 0) << o.err;
+  auto metrics = [](const std::string& dir) {
+    std::ifstream f(dir + "/metrics.json");
+    return nlohmann::json::parse(f, nullptr, false);
+  };
+  const nlohmann::json a = metrics(live), b = metrics(replay);
+  ASSERT_FALSE(a.is_discarded() || b.is_discarded());
+  EXPECT_EQ(a["bytes_total"], b["bytes_total"]);
+  EXPECT_EQ(a["per_agent"][0]["raw_ate_rmse_m"], b["per_agent"][0]["raw_ate_rmse_m"]);
+  EXPECT_EQ(a["per_agent"][0]["keyframes"], b["per_agent"][0]["keyframes"]);
+
+  o = run("--dataset " + kMicro + " --out " + replay + " --max-frames 30 --replay-tracking " + tracking,
+          "track_stale");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("'frames' differs: recorded '40', this run '30'"), std::string::npos) << o.err;
+  o = run("--dataset " + kMicro + " --out " + replay + " --record-tracking a --replay-tracking b", "track_both");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("exclude each other"), std::string::npos) << o.err;
+}

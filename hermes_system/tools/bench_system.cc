@@ -38,6 +38,7 @@
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
+#include "hermes/system/tracking_record.h"
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -83,6 +84,13 @@ const char* kUsage =
     "                   With --duration S, each robot flies only its first S seconds\n"
     "                   (a quick check of the set-up).\n"
     "  --out DIR        --full's store folder (see above)\n"
+    "  --tracking-dir D --full: the first run records every robot's tracking in D (default\n"
+    "                   OUT/tracking, not in git; ~50 MB per robot over whole V1),\n"
+    "                   the later runs replay it instead of tracking the images (same\n"
+    "                   results, a fraction of the time); a recording made for other\n"
+    "                   sequences or tracker settings is recorded again. Each run's\n"
+    "                   progress and bench_row.json say tracking record / replay.\n"
+    "  --live-tracking  --full: track every run live (no recording)\n"
     "  --run-out DIR    also write each run's outputs as `hermes run` does (metrics.json,\n"
     "                   loops.csv, loop_attempts.csv but for false_candidates, ...) to\n"
     "                   DIR/<variant>_<robots> (--swarm only; --full keeps them in --out)\n"
@@ -190,7 +198,9 @@ Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::str
 Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw, const Robots& robots,
                                     const std::vector<std::string>& overrides,
                                     const std::function<void(const system::ProgressInfo&)>& progress,
-                                    const std::string& out_dir) {
+                                    const std::string& out_dir,
+                                    const std::string& tracking_dir = "",
+                                    std::string* tracking_mode = nullptr) {
   std::vector<std::string> sets = overrides;
   for (const std::string& s : variantSets(v)) sets.push_back(s);
   sets.push_back("link.bandwidth_mbitps=" + bw);
@@ -199,17 +209,47 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   if (!config.ok()) return Error{config.error()};
   auto params = system::readSystemParams(*config);
   if (!params.ok()) return Error{params.error()};
-  std::vector<system::AgentSource> sources;
-  for (const auto& [name, dir] : robots) {
-    auto ds = Dataset::open(dir.string(), params->run.dataset);
-    if (!ds.ok()) return Error{ds.error()};
-    sources.push_back({name, std::move(*ds), 0});
+  auto openSources = [&]() -> Expected<std::vector<system::AgentSource>> {
+    std::vector<system::AgentSource> sources;
+    for (const auto& [name, dir] : robots) {
+      auto ds = Dataset::open(dir.string(), params->run.dataset);
+      if (!ds.ok()) return Error{ds.error()};
+      sources.push_back({name, std::move(*ds), 0});
+    }
+    return sources;
+  };
+  auto sources = openSources();
+  if (!sources) return Error{sources.error()};
+  // Tracking: replayed when every robot's recording in tracking_dir fits this
+  // run (tracking_record.h), recorded there otherwise (the first run of a set,
+  // or after the sequences or tracker settings changed).
+  std::string mode = "live";
+  if (!tracking_dir.empty()) {
+    const Status fit = system::trackingRecordingsFit(*params, *sources, tracking_dir);
+    mode = fit ? "replay" : "record";
+    (fit ? params->clock.tracking_replay_dir : params->clock.tracking_record_dir) = tracking_dir;
+    if (!fit && fs::exists(tracking_dir))
+      std::fprintf(stderr, "  %s_%s: recording the tracking again: %s\n", v.c_str(), bw.c_str(),
+                   fit.error().c_str());
   }
   // One spool per process: two benchmarks may run side by side.
   const std::string spool =
       (fs::temp_directory_path() / ("hermes_bench_system_spool_" + std::to_string(::getpid()))).string();
-  auto run = system::OfflineRun::create(*params, std::move(sources), spool, HERMES_SOURCE_DIR);
+  auto run = system::OfflineRun::create(*params, std::move(*sources), spool, HERMES_SOURCE_DIR);
+  if (!run.ok() && mode == "replay") {  // e.g. a recording cut short: record it again
+    std::fprintf(stderr, "  %s_%s: recording the tracking again: %s\n", v.c_str(), bw.c_str(),
+                 run.error().c_str());
+    mode = "record";
+    params->clock.tracking_replay_dir.clear();
+    params->clock.tracking_record_dir = tracking_dir;
+    sources = openSources();
+    if (!sources) return Error{sources.error()};
+    run = system::OfflineRun::create(*params, std::move(*sources), spool, HERMES_SOURCE_DIR);
+  }
   if (!run.ok()) return Error{run.error()};
+  if (tracking_mode) *tracking_mode = mode;
+  std::fprintf(stderr, "  %s_%s: tracking %s%s\n", v.c_str(), bw.c_str(), mode.c_str(),
+               mode == "live" ? "" : (" (" + tracking_dir + ")").c_str());
   std::size_t injected = 0;
   if (v == "false_candidates") injectFalseCandidates(**run, 0.2, &injected);
   std::vector<server::LoopAttempt> attempts;
@@ -234,6 +274,7 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   j["agents"] = robots.size();
   j["bandwidth_mbitps"] = std::atof(bw.c_str());
   j["wall_s"] = wall;
+  j["tracking"] = mode;  // live | record | replay (same results; wall time differs)
   j["lost_messages"] = (*run)->lostMessages();
   // Server memory: its whole state as a checkpoint holds it (map, queue, loops,
   // graph), and the peak of what it held for robots awaiting merge.
@@ -327,12 +368,17 @@ void printFullRow(const std::string& v, const std::string& bw, const nlohmann::j
 /// stored as it finishes (BenchStore), then the table, the combined JSON and plots.
 int runFull(const std::string& set, std::vector<std::string> variants, std::vector<std::string> bandwidths,
             bool variants_given, bool bandwidths_given, double rate, double first_s, std::string out,
-            const std::vector<std::string>& overrides, const std::string& json_out) {
+            const std::vector<std::string>& overrides, const std::string& json_out,
+            bool live_tracking, std::string tracking_dir) {
   auto data = fullSet(set);
   if (!data.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", data.error().c_str()), 2;
   if (!variants_given) variants = split("hermes,raw,fixed_k100");
   if (!bandwidths_given) bandwidths = split("0,10,2,0.5");
   if (out.empty()) out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set;
+  // The tracking is recorded by the first run and replayed by the others
+  // (tracking_record.h): the agents' tracking is most of a run's time.
+  if (live_tracking) tracking_dir.clear();
+  else if (tracking_dir.empty()) tracking_dir = (fs::path(out) / "tracking").string();
   const auto& [dir, seqs] = *data;
   if (Status s = system::ensureWholeRenders(dir, seqs, std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt", rate); !s)
     return std::fprintf(stderr, "hermes_bench_system: %s\n", s.error().c_str()), 1;
@@ -373,15 +419,17 @@ int runFull(const std::string& set, std::vector<std::string> variants, std::vect
       }
       const auto t0 = std::chrono::steady_clock::now();
       double last = 0;
+      std::string mode;
       auto progress = [&](const system::ProgressInfo& p) {
         const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         if (wall - last < 30) return;
         last = wall;
-        std::fprintf(stderr, "  [%zu/%zu %s] sim %6.1f/%.1f s%s  frames %zu/%zu  agents merged %d/%zu  wall %.0f s\n",
-                     index, total, name, p.sim_time, p.sim_end, p.draining ? " (delivering backlog)" : "",
-                     p.frames_done, p.frames_total, p.agents_merged, robots.size(), wall);
+        std::fprintf(stderr, "  [%zu/%zu %s, tracking %s] sim %6.1f/%.1f s%s  frames %zu/%zu  agents merged %d/%zu  wall %.0f s\n",
+                     index, total, name, mode.c_str(), p.sim_time, p.sim_end,
+                     p.draining ? " (delivering backlog)" : "", p.frames_done, p.frames_total,
+                     p.agents_merged, robots.size(), wall);
       };
-      auto j = runVariant(v, bw, robots, overrides, progress, store->runDir(name));
+      auto j = runVariant(v, bw, robots, overrides, progress, store->runDir(name), tracking_dir, &mode);
       if (!j.ok()) return std::fprintf(stderr, "hermes_bench_system: %s: %s\n", name, j.error().c_str()), 1;
       (*j)["run"] = name;
       if (Status s = store->save(name, *j); !s)
@@ -420,6 +468,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> overrides;
   std::string full, full_out;
   bool variants_given = false, bandwidths_given = false, duration_given = false;
+  bool live_tracking = false;
+  std::string tracking_dir;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -459,6 +509,10 @@ int main(int argc, char** argv) {
       full = next();
     } else if (a == "--out") {
       full_out = next();
+    } else if (a == "--live-tracking") {
+      live_tracking = true;
+    } else if (a == "--tracking-dir") {
+      tracking_dir = next();
     } else if (a == "--set") {
       overrides.push_back(next());
     } else if (a == "--json") {
@@ -482,11 +536,14 @@ int main(int argc, char** argv) {
     return std::fprintf(stderr, "hermes_bench_system: --full and --swarm are two different tables; give one\n"), 2;
   if (!full_out.empty() && full.empty())
     return std::fprintf(stderr, "hermes_bench_system: --out is --full's store folder; give --full too\n"), 2;
+  if ((live_tracking || !tracking_dir.empty()) && full.empty())
+    return std::fprintf(stderr, "hermes_bench_system: --live-tracking / --tracking-dir belong to --full\n"), 2;
   if (!run_out.empty() && swarm.empty())
     return std::fprintf(stderr, "hermes_bench_system: --run-out belongs to --swarm (--full keeps every run in --out)\n"), 2;
   if (!full.empty())
     return runFull(full, variants, bandwidths, variants_given, bandwidths_given, rate,
-                   duration_given ? duration : 0, full_out, overrides, json_out);
+                   duration_given ? duration : 0, full_out, overrides, json_out, live_tracking,
+                   tracking_dir);
   if (!swarm.empty()) {
     if (!variants_given) variants = {"hermes", "raw"};
     for (const std::string& n : swarm)

@@ -30,6 +30,7 @@ const char* kUsage =
     "                  [--set key=value ...] [--no-server]\n"
     "                  [--bandwidth MBITPS | --link-trace FILE | --scenario FILE] [--max-frames N]\n"
     "                  [--server-restart-at S ...] [--agent-reset NAME@S ...]\n"
+    "                  [--record-tracking DIR | --replay-tracking DIR]\n"
     "                  [--no-plots] [--json] [--quiet]\n"
     "Runs one agent per dataset folder (EuRoC ASL stereo or TUM RGB-D layout). With the\n"
     "server (default), all agents and the edge server run in one process on a simulated\n"
@@ -63,6 +64,11 @@ const char* kUsage =
     "NAME restarts with a fresh map and the next session (its spool kept); the server\n"
     "re-localises it through loops or, after server.relocalisation_timeout_s, reports it\n"
     "as a new robot (metrics.json relocalised / robots_new, per_agent sessions).\n"
+    "--record-tracking DIR (system.tracking_record_dir): also write every agent's tracking\n"
+    "(per frame status and pose, the raw windows and motion hints) to DIR/<agent>.htrk.\n"
+    "--replay-tracking DIR (system.tracking_replay_dir): load no image, replay that tracking\n"
+    "instead: the same run for any variant / bandwidth, minus the tracking time. Refused\n"
+    "when the recording was made for other frames, dataset or tracker/corruption params.\n"
     "--json: print metrics.json to stdout instead of the report.\n"
     "Exit: 0 ok, 1 failure while running, 2 bad input.\n";
 
@@ -98,6 +104,7 @@ struct Args {
   std::string out, config;
   bool no_server = false, json = false, help = false, plots = true, quiet = false;
   std::string bandwidth, link_trace, scenario;
+  std::string record_tracking, replay_tracking;
   long max_frames = -1;
   std::vector<double> restart_at;
   std::vector<system::AgentReset> agent_reset;
@@ -156,6 +163,10 @@ std::string parseArgs(int argc, char** argv, Args* a) {
       auto parsed = system::parseAgentResets(v);
       if (!parsed || parsed->size() != 1) return "--agent-reset: " + (parsed ? "'" + v + "' is not one NAME@S" : parsed.error());
       a->agent_reset.push_back(parsed->front());
+    } else if (arg == "--record-tracking") {
+      if (!value(&a->record_tracking)) return "--record-tracking needs a folder";
+    } else if (arg == "--replay-tracking") {
+      if (!value(&a->replay_tracking)) return "--replay-tracking needs a folder";
     } else if (arg == "--max-frames") {
       if (!value(&v)) return "--max-frames needs N";
       char* end = nullptr;
@@ -179,6 +190,10 @@ std::string parseArgs(int argc, char** argv, Args* a) {
     return "--server-restart-at needs the server (drop --no-server)";
   if (a->no_server && !a->agent_reset.empty())
     return "--agent-reset needs the server (drop --no-server)";
+  if (!a->record_tracking.empty() && !a->replay_tracking.empty())
+    return "--record-tracking and --replay-tracking exclude each other";
+  if (a->no_server && (!a->record_tracking.empty() || !a->replay_tracking.empty()))
+    return "--record-tracking / --replay-tracking need the server (drop --no-server)";
   return "";
 }
 
@@ -245,6 +260,8 @@ int main(int argc, char** argv) {
   if (!args.bandwidth.empty()) sets.push_back("link.bandwidth_mbitps=" + args.bandwidth);
   if (!args.link_trace.empty()) sets.push_back("link.trace=" + args.link_trace);
   if (!args.scenario.empty()) sets.push_back("link.scenario=" + args.scenario);
+  if (!args.record_tracking.empty()) sets.push_back("system.tracking_record_dir=" + args.record_tracking);
+  if (!args.replay_tracking.empty()) sets.push_back("system.tracking_replay_dir=" + args.replay_tracking);
   auto config = agent::loadRunConfig(args.config, sets);
   if (!config.ok()) return badInput(config.error());
   auto params = system::readSystemParams(*config);

@@ -93,6 +93,8 @@ void AgentPipeline::startWorkers(bool parallel) {
 
 Status AgentPipeline::setParallel(bool parallel) {
   if (frames_ > 0) return Error{"agent " + name_ + ": choose the threading before the first frame"};
+  if (parallel && (recorder_ || replay_))
+    return Error{"agent " + name_ + ": tracking record / replay needs synchronous mode (agent.parallel: false)"};
   params_.threads.parallel = parallel;
   startWorkers(parallel);
   return Status::Ok();
@@ -154,6 +156,7 @@ void AgentPipeline::pollUplink(double now) {
 }
 
 Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
+  if (replay_) return Error{"agent " + name_ + ": replaying a tracking recording: no frames to feed"};
   if (!std::isfinite(frame.stamp))
     return Error{"agent " + name_ + ": non-finite frame stamp"};
   if (frames_ > 0 && !(frame.stamp > last_stamp_))
@@ -181,7 +184,81 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
     windowStep(frame.stamp);
   timings_.add("window", msSince(t1));
   timings_.add("agent_total", msSince(t0));
+  if (recorder_) {
+    TrackingStep step;
+    step.stamp = frame.stamp;
+    step.status = result->status;
+    if (result->status == TrackingStatus::kOk) step.T_W_B = trajectory_.back().T_W_B;
+    recordStep(std::move(step));
+    if (!tracking_status_) return Error{"agent " + name_ + ": " + tracking_status_.error()};
+  }
   return result;
+}
+
+Status AgentPipeline::recordTracking(std::unique_ptr<TrackingLogWriter> writer) {
+  if (frames_ > 0 || replay_ || recorder_)
+    return Error{"agent " + name_ + ": start recording before the first frame, once, not while replaying"};
+  if (window_worker_)
+    return Error{"agent " + name_ + ": tracking record needs synchronous mode (agent.parallel: false)"};
+  recorder_ = std::move(writer);
+  return Status::Ok();
+}
+
+void AgentPipeline::recordStep(TrackingStep step) {
+  step.motion = tracker_.motionHint();
+  step.window = std::move(tapped_);
+  tapped_.reset();
+  if (tracking_status_) tracking_status_ = recorder_->append(step);
+}
+
+Status AgentPipeline::finishTracking() {
+  if (replay_) {
+    if (tracking_status_ && !replay_->done())
+      tracking_status_ = Error{"tracking replay: steps of the recording were left over"};
+  } else if (recorder_) {
+    if (tracking_status_) {
+      TrackingSummary summary;
+      summary.frames = frames_;
+      summary.lost = lost_;
+      summary.keyframes = static_cast<std::int64_t>(tracker_.keyframes().size());
+      summary.landmarks = static_cast<std::int64_t>(tracker_.landmarks().size());
+      summary.total_health = tracker_.totalHealth();
+      tracking_status_ = recorder_->close(summary);
+    }
+    recorder_.reset();
+  }
+  if (!tracking_status_) return Error{"agent " + name_ + ": " + tracking_status_.error()};
+  return Status::Ok();
+}
+
+Status AgentPipeline::replayTracking(TrackingLog log) {
+  if (frames_ > 0 || replay_ || recorder_)
+    return Error{"agent " + name_ + ": start replaying before the first frame, once, not while recording"};
+  if (window_worker_)
+    return Error{"agent " + name_ + ": tracking replay needs synchronous mode (agent.parallel: false)"};
+  replay_ = std::make_unique<ReplayTracker>(std::move(log));
+  setWindowIdentity(*replay_, agent_id_, session_);
+  return Status::Ok();
+}
+
+Expected<TrackingStatus> AgentPipeline::replayFrame(double stamp) {
+  if (!replay_) return Error{"agent " + name_ + ": not replaying a tracking recording"};
+  if (frames_ > 0 && !(stamp > last_stamp_))
+    return Error{"agent " + name_ + ": frame stamp " + std::to_string(stamp) +
+                 " s is not after the previous one (" + std::to_string(last_stamp_) + " s)"};
+  const auto t0 = std::chrono::steady_clock::now();
+  auto step = replay_->next(/*flush=*/false, stamp);
+  if (!step.ok()) return Error{"agent " + name_ + ": " + step.error()};
+  last_stamp_ = stamp;
+  ++frames_;
+  if ((*step)->status == TrackingStatus::kOk)
+    trajectory_.push_back(StampedPose{stamp, (*step)->T_W_B});
+  else
+    ++lost_;
+  windowStep(stamp);
+  timings_.add("window", msSince(t0));
+  timings_.add("agent_total", msSince(t0));
+  return (*step)->status;
 }
 
 Status AgentPipeline::submitWindow(const Submap& submap, std::vector<std::uint8_t>&& bytes, double now) {
@@ -213,20 +290,33 @@ WindowSink AgentPipeline::makeSink(double now, double backlog_bytes, std::mutex*
 }
 
 void AgentPipeline::windowStep(double stamp, bool retry_carry) {
+  if (replay_) {
+    windowStepOn(*replay_, stamp, retry_carry);
+  } else if (recorder_) {
+    WindowTap tap(tracker_);
+    windowStepOn(tap, stamp, retry_carry);
+    if (tap.taken()) tapped_ = std::move(tap.taken());
+  } else {
+    windowStepOn(tracker_, stamp, retry_carry);
+  }
+}
+
+template <typename Source>
+void AgentPipeline::windowStepOn(Source& source, double stamp, bool retry_carry) {
   if (!uplink_) {
     if (retry_carry)
-      agent::retryCarriedWindow(tracker_, *distiller_, monitor_, stamp, &windows_, &timings_);
+      agent::retryCarriedWindow(source, *distiller_, monitor_, stamp, &windows_, &timings_);
     else
-      runWindowStep(tracker_, *distiller_, monitor_, stamp, &windows_, &timings_);
+      runWindowStep(source, *distiller_, monitor_, stamp, &windows_, &timings_);
     return;
   }
   const double now = uplink_clock_ ? uplink_clock_()
                                    : (retry_carry ? stamp : last_stamp_) - clock_offset_;
   const WindowSink sink = makeSink(now, static_cast<double>(uplink_->backlogBytes()), nullptr);
   if (retry_carry)
-    agent::retryCarriedWindow(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
+    agent::retryCarriedWindow(source, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
   else
-    runWindowStep(tracker_, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
+    runWindowStep(source, *distiller_, uplink_->monitor(), stamp, &windows_, &timings_, &sink);
   uplink_->poll(now);
 }
 
@@ -259,20 +349,35 @@ void AgentPipeline::flushWindow() {
     return;
   }
   // A stamp one window period after the last frame makes the open window due.
-  windowStep(last_stamp_ + params_.tracker.window.period_s + 1e-6);
+  const double stamp = last_stamp_ + params_.tracker.window.period_s + 1e-6;
+  if (replay_) {
+    auto step = replay_->next(/*flush=*/true, stamp);
+    if (!step.ok()) {  // reported by finishTracking(); no window is cut
+      if (tracking_status_) tracking_status_ = Error{step.error()};
+      return;
+    }
+  }
+  windowStep(stamp);
+  if (recorder_) {
+    TrackingStep step;
+    step.flush = true;
+    step.stamp = stamp;
+    recordStep(std::move(step));
+  }
 }
 
 AgentMetrics AgentPipeline::metrics() const {
   AgentMetrics m;
   m.agent = name_;
   m.lost_rate = lostRate();
-  m.keyframes = static_cast<std::int64_t>(tracker_.keyframes().size());
-  m.landmarks = static_cast<std::int64_t>(tracker_.landmarks().size());
+  const TrackingSummary* replayed = replay_ ? &replay_->summary() : nullptr;
+  m.keyframes = replayed ? replayed->keyframes : static_cast<std::int64_t>(tracker_.keyframes().size());
+  m.landmarks = replayed ? replayed->landmarks : static_cast<std::int64_t>(tracker_.landmarks().size());
   const WindowCounters w = windows();
   m.bytes = w.bytes;
   m.submaps_sent = w.sent;
   m.submaps_deferred = w.deferred + w.refused;
-  m.weak_frames = tracker_.totalHealth().weak;
+  m.weak_frames = replayed ? replayed->total_health.weak : tracker_.totalHealth().weak;
   m.trouble_windows = w.trouble;
   return m;
 }

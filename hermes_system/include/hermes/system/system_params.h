@@ -69,6 +69,11 @@ struct ClockParams {
   /// window is lost) and created again with a fresh map and the next session,
   /// going on from the dataset frame due at S (offline_run.h).
   std::vector<AgentReset> agent_reset;
+  /// Tracking record / replay (tracking_record.h; `hermes run --record-tracking
+  /// DIR` / `--replay-tracking DIR`): every agent's tracking is written to /
+  /// read from DIR/<agent>.htrk; replay tracks no image. Empty: off. Not with
+  /// agent_reset or agent.parallel.
+  std::string tracking_record_dir, tracking_replay_dir;
 
   Status read(const Config& config);
   Status validate() const;

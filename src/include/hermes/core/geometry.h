@@ -36,6 +36,14 @@ class SE3 {
   explicit SE3(const Mat4& T);
 
   static SE3 identity() { return SE3(); }
+  /// From a stored unit quaternion, taken as it is (no renormalisation): a pose
+  /// written bit for bit reads back bit for bit (tracking recordings).
+  static SE3 fromUnitQuat(const Quat& q, const Vec3& t) {
+    SE3 T;
+    T.q_ = q;
+    T.t_ = t;
+    return T;
+  }
   /// Exponential map; tangent ordered [rho (translation); phi (rotation)].
   static SE3 exp(const Vec6& xi);
   /// Logarithm with the same ordering as exp().

@@ -25,6 +25,13 @@
 //    do); flushWindow() waits for both workers and drains their queues; the
 //    destructor finishes queued windows and joins the threads;
 //  * uplink() is for single-threaded use; read the sender through withUplink().
+//
+// Tracking record / replay (tracking_log.h, synchronous mode only): with
+// recordTracking() every feed() and flushWindow() also appends what the tracker
+// produced (status, body pose, the window cut and the motion hint) to a
+// recording; with replayTracking() no image is tracked: replayFrame(stamp)
+// takes the next recorded frame instead of feed() and the window step runs on
+// the recorded windows (ReplayTracker), exactly as it ran on the tracker's.
 #pragma once
 
 #include <atomic>
@@ -42,6 +49,7 @@
 #include "hermes/agent/odometry_corruption.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/agent/tracking_source.h"
 #include "hermes/agent/uplink_sender.h"
 #include "hermes/agent/window_step.h"
 #include "hermes/core/global_pose.h"
@@ -82,6 +90,21 @@ class AgentPipeline {
   /// frame, or a stamp not after the previous one.
   Expected<TrackResult> feed(const CameraFrame& frame);
 
+  /// Records the tracking from the first frame on into `writer` (synchronous
+  /// mode, before the first frame). flushWindow() records the last step;
+  /// finishTracking() then writes the summary.
+  Status recordTracking(std::unique_ptr<TrackingLogWriter> writer);
+  /// After flushWindow(): closes the recording, or checks that the whole
+  /// recording was replayed; the first error of either (ok otherwise).
+  Status finishTracking();
+  /// Replay mode (synchronous, before the first frame): feed() is refused and
+  /// replayFrame() takes the recorded frames in order.
+  Status replayTracking(TrackingLog log);
+  bool replaying() const { return replay_ != nullptr; }
+  /// Replay mode: the recorded frame at `stamp` (the next one) as feed() would
+  /// have tracked it. Errors: not replaying, the recording ends or is out of step.
+  Expected<TrackingStatus> replayFrame(double stamp);
+
   const std::string& name() const { return name_; }
   /// Body poses of every successfully tracked frame, in time order.
   const Trajectory& trajectory() const { return trajectory_; }
@@ -93,6 +116,7 @@ class AgentPipeline {
   /// agent_total (feed() as a whole), distill, encode (on the uplink thread in
   /// parallel mode).
   TimingStats timings() const;
+  /// The live tracker (empty while replaying: see metrics()).
   const Tracker& tracker() const { return tracker_; }
   /// Windows distilled and encoded so far (all zero until windows exist). In
   /// parallel mode a copy of the counters as of the uplink stage's last job,
@@ -187,6 +211,11 @@ class AgentPipeline {
   /// The window step at tracker time `stamp` (uplink time: the last frame's;
   /// when retrying the carried window: stamp - clock offset).
   void windowStep(double stamp, bool retry_carry = false);
+  /// windowStep on `source`: the tracker, a WindowTap or the ReplayTracker.
+  template <typename Source>
+  void windowStepOn(Source& source, double stamp, bool retry_carry);
+  /// Appends a step to the recording (the first error is kept).
+  void recordStep(TrackingStep step);
   /// Hands an encoded window to the uplink at uplink time `now` (parallel mode:
   /// under uplink_mu_) and tells the monitor whether the previous one arrived.
   Status submitWindow(const Submap& submap, std::vector<std::uint8_t>&& bytes, double now);
@@ -232,6 +261,10 @@ class AgentPipeline {
   std::int64_t frames_ = 0, lost_ = 0;
   BandwidthMonitor monitor_;
   std::unique_ptr<OdometryCorruptor> corruptor_;
+  std::unique_ptr<TrackingLogWriter> recorder_;
+  Status tracking_status_;  ///< first record / replay error
+  std::optional<Submap> tapped_;  ///< recording: the window the last step cut
+  std::unique_ptr<ReplayTracker> replay_;
   WindowCounters windows_;
   double last_stamp_ = 0;
   TimingStats timings_;
