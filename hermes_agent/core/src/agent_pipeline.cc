@@ -155,13 +155,17 @@ void AgentPipeline::pollUplink(double now) {
   if (uplink_) uplink_->poll(now);
 }
 
+Status AgentPipeline::checkStamp(double stamp) const {
+  if (!std::isfinite(stamp)) return Error{"agent " + name_ + ": non-finite frame stamp"};
+  if (frames_ > 0 && !(stamp > last_stamp_))
+    return Error{"agent " + name_ + ": frame stamp " + std::to_string(stamp) +
+                 " s is not after the previous one (" + std::to_string(last_stamp_) + " s)"};
+  return Status::Ok();
+}
+
 Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
   if (replay_) return Error{"agent " + name_ + ": replaying a tracking recording: no frames to feed"};
-  if (!std::isfinite(frame.stamp))
-    return Error{"agent " + name_ + ": non-finite frame stamp"};
-  if (frames_ > 0 && !(frame.stamp > last_stamp_))
-    return Error{"agent " + name_ + ": frame stamp " + std::to_string(frame.stamp) +
-                 " s is not after the previous one (" + std::to_string(last_stamp_) + " s)"};
+  if (Status s = checkStamp(frame.stamp); !s) return Error{s.error()};
   const auto t0 = std::chrono::steady_clock::now();
   if (corruptor_ && corruptor_->noticedJumpAt(frame.stamp)) tracker_.markLost();
   auto result = tracker_.feed(frame);
@@ -243,9 +247,7 @@ Status AgentPipeline::replayTracking(TrackingLog log) {
 
 Expected<TrackingStatus> AgentPipeline::replayFrame(double stamp) {
   if (!replay_) return Error{"agent " + name_ + ": not replaying a tracking recording"};
-  if (frames_ > 0 && !(stamp > last_stamp_))
-    return Error{"agent " + name_ + ": frame stamp " + std::to_string(stamp) +
-                 " s is not after the previous one (" + std::to_string(last_stamp_) + " s)"};
+  if (Status s = checkStamp(stamp); !s) return Error{s.error()};
   const auto t0 = std::chrono::steady_clock::now();
   auto step = replay_->next(/*flush=*/false, stamp);
   if (!step.ok()) return Error{"agent " + name_ + ": " + step.error()};

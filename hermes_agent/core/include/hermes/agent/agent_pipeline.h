@@ -214,6 +214,8 @@ class AgentPipeline {
   /// windowStep on `source`: the tracker, a WindowTap or the ReplayTracker.
   template <typename Source>
   void windowStepOn(Source& source, double stamp, bool retry_carry);
+  /// A frame stamp must be finite and after the previous frame's (feed, replayFrame).
+  Status checkStamp(double stamp) const;
   /// Appends a step to the recording (the first error is kept).
   void recordStep(TrackingStep step);
   /// Hands an encoded window to the uplink at uplink time `now` (parallel mode:
