@@ -55,6 +55,25 @@ Status OrbParams::validate() const {
   return Status::Ok();
 }
 
+cv::Point2d FeatureSet::levelRatio(int level) const {
+  if (level <= 0) return {1.0, 1.0};
+  if (std::size_t(level) < pyramid.size() && !pyramid[0].empty() && !pyramid[level].empty())
+    return {double(pyramid[0].cols) / pyramid[level].cols,
+            double(pyramid[0].rows) / pyramid[level].rows};
+  const double s = std::size_t(level) < scales.size() ? scales[level] : 1.0;
+  return {s, s};
+}
+
+cv::Point2d FeatureSet::toBase(int level, double x, double y) const {
+  const cv::Point2d r = levelRatio(level);
+  return {(x + 0.5) * r.x - 0.5, (y + 0.5) * r.y - 0.5};
+}
+
+cv::Point2d FeatureSet::toLevel(int level, double u, double v) const {
+  const cv::Point2d r = levelRatio(level);
+  return {(u + 0.5) / r.x - 0.5, (v + 0.5) / r.y - 0.5};
+}
+
 std::vector<cv::Mat> buildPyramid(const cv::Mat& grey, int levels, double scale) {
   std::vector<cv::Mat> pyr(levels);
   pyr[0] = grey;
@@ -286,8 +305,9 @@ Expected<FeatureSet> OrbExtractor::extract(const cv::Mat& image) const {
       if (row_of[i] < 0) continue;
       const cv::KeyPoint& src = level_kps[i];
       Keypoint k;
-      k.u = src.pt.x * scales_[l];
-      k.v = src.pt.y * scales_[l];
+      const cv::Point2d base = fs.toBase(l, src.pt.x, src.pt.y);
+      k.u = float(base.x);
+      k.v = float(base.y);
       k.octave = std::uint8_t(l);
       fs.keypoints.push_back(k);
       Descriptor d;

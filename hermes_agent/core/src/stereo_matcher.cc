@@ -203,13 +203,16 @@ Expected<StereoResult> matchStereo(FeatureSet* left, const FeatureSet& right,
 
     const int o = kl.octave;
     const double s = left->scales[o];
-    const int xl = int(std::lround(kl.u / s)), y = int(std::lround(kl.v / s));
-    const int xr0 = int(std::lround(right.keypoints[best_j].u / s));
+    const cv::Point2d kl_level = left->toLevel(o, kl.u, kl.v);
+    const int xl = int(std::lround(kl_level.x)), y = int(std::lround(kl_level.y));
+    const Keypoint& kr = right.keypoints[best_j];
+    const int xr0 = int(std::lround(right.toLevel(o, kr.u, kr.v).x));
     double xr = 0, cost = 0;
     if (!refineDisparitySad(left->pyramid[o], right.pyramid[o], xl, y, xr0, p.sad_half_window,
                             p.sad_search_radius, &xr, &cost, parabola))
       continue;
-    double u_right = xr * s;
+    // The level-o match measured from the integer pixel xl, carried to kl.u.
+    double u_right = kl.u - (left->toBase(o, xl, y).x - right.toBase(o, xr, y).x);
     if (o > 0) {
       // Coarse-to-fine: the level-o estimate is refined again on level 0, where a
       // pixel is s times smaller, within the level-o uncertainty.

@@ -191,3 +191,54 @@ TEST(OrbExtractor, UndistortKeypointsInvertsTheLens) {
     EXPECT_NEAR(fs.keypoints[i].v, truth[i].y(), 1e-3);
   }
 }
+
+// Keypoints found on coarse levels land on the level-0 corner they belong to:
+// the level's pixel centres are mapped as the resampling placed them, so there
+// is no bias towards the image origin that grows with the level's scale
+// (x * s would be (s - 1) / 2 px off: 0.5 px at level 4, 1.3 px at level 7).
+TEST(OrbExtractor, CoarseLevelKeypointsHaveNoOffset) {
+  // Bright squares on a dark background; square k covers pixels [a, a + 39],
+  // so its corners lie at a - 0.5 and a + 39.5 in pixel-centre coordinates.
+  cv::Mat img(480, 752, CV_8U, cv::Scalar(30));
+  std::vector<double> edges_x, edges_y;
+  for (int a = 40; a + 40 < 752; a += 88) {
+    edges_x.push_back(a - 0.5);
+    edges_x.push_back(a + 39.5);
+  }
+  for (int b = 40; b + 40 < 480; b += 88) {
+    edges_y.push_back(b - 0.5);
+    edges_y.push_back(b + 39.5);
+  }
+  for (int a = 40; a + 40 < 752; a += 88)
+    for (int b = 40; b + 40 < 480; b += 88)
+      img(cv::Rect(a, b, 40, 40)).setTo(cv::Scalar(220));
+  auto nearest = [](const std::vector<double>& e, double x) {
+    double best = e.front();
+    for (double v : e)
+      if (std::abs(v - x) < std::abs(best - x)) best = v;
+    return best;
+  };
+  OrbParams p;
+  p.num_features = 2000;
+  const auto fs = OrbExtractor(p).extract(img);
+  ASSERT_TRUE(fs.ok()) << fs.error();
+  double sum_x = 0, sum_y = 0;
+  int n = 0;
+  for (const auto& k : fs->keypoints) {
+    if (k.octave < 4) continue;
+    sum_x += k.u - nearest(edges_x, k.u);
+    sum_y += k.v - nearest(edges_y, k.v);
+    ++n;
+  }
+  ASSERT_GE(n, 20) << "too few coarse-level corners to judge";
+  // Inside/outside placement of FAST cancels over the four corners of a square.
+  EXPECT_LT(std::abs(sum_x / n), 0.3) << "mean x offset on levels >= 4";
+  EXPECT_LT(std::abs(sum_y / n), 0.3) << "mean y offset on levels >= 4";
+  // toLevel inverts toBase on every level.
+  for (int l = 0; l < p.num_levels; ++l) {
+    const cv::Point2d b = fs->toBase(l, 17.25, 33.5);
+    const cv::Point2d back = fs->toLevel(l, b.x, b.y);
+    EXPECT_NEAR(back.x, 17.25, 1e-9);
+    EXPECT_NEAR(back.y, 33.5, 1e-9);
+  }
+}

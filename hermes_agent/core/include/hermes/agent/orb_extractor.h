@@ -44,6 +44,17 @@ struct FeatureSet {
   int width = 0, height = 0;            ///< level-0 image size
 
   std::size_t size() const { return keypoints.size(); }
+  /// Level-0 coordinates of the point (x, y) given in level `level`'s pixels.
+  /// The levels are resampled with pixel centres aligned (cv::resize), so a
+  /// level pixel x covers level-0 x0 = (x + 0.5) * W0 / Wl - 0.5 (per axis, the
+  /// levels' real sizes, not the nominal scale). Without the pyramid (decoded
+  /// features) the nominal scale is used with the same centre alignment.
+  cv::Point2d toBase(int level, double x, double y) const;
+  /// The inverse of toBase: level-`level` pixel coordinates of a level-0 point.
+  cv::Point2d toLevel(int level, double u, double v) const;
+
+ private:
+  cv::Point2d levelRatio(int level) const;
 };
 
 class OrbExtractor {
