@@ -100,6 +100,7 @@ const char* toString(LoopStatus status) {
     case LoopStatus::kTooFewInliers: return "too_few_inliers";
     case LoopStatus::kDegenerate: return "degenerate";
     case LoopStatus::kSkippedDuplicate: return "skipped_duplicate";
+    case LoopStatus::kSkippedBudget: return "skipped_budget";
   }
   return "unknown";
 }

@@ -1,5 +1,7 @@
 #include "hermes/server/map_manager.h"
 
+#include "hermes/server/closure_budget.h"
+
 #include "hermes/server/pose_graph_io.h"
 
 #include "hermes/core/parallel_jobs.h"
@@ -40,7 +42,8 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"min_world_loops", &min_world_loops},
                    IntKey{"loop_threads", &loop_threads},
                    IntKey{"duplicate_neighbours", &duplicate_neighbours},
-                   IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops}})
+                   IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops},
+                   IntKey{"closure_budget", &closure_budget}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
   for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
@@ -69,6 +72,7 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "loop_threads", loop_threads);
   out.set(p + "duplicate_neighbours", duplicate_neighbours);
   out.set(p + "duplicate_min_pair_loops", duplicate_min_pair_loops);
+  out.set(p + "closure_budget", closure_budget);
 }
 
 Status MapManagerParams::validate() const {
@@ -85,6 +89,7 @@ Status MapManagerParams::validate() const {
   if (loop_threads < 1 || loop_threads > 64) return Error{"loop_threads must be in 1..64"};
   if (duplicate_neighbours < 0) return Error{"duplicate_neighbours must be >= 0"};
   if (duplicate_min_pair_loops < 0) return Error{"duplicate_min_pair_loops must be >= 0"};
+  if (closure_budget < 0) return Error{"closure_budget must be >= 0 (0 = verify all)"};
   return Status::Ok();
 }
 
@@ -304,6 +309,8 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
     return TrajPair{{j.query.agent, j.query.session}, {j.candidate->key.agent, j.candidate->key.session}};
   };
   std::map<TrajPair, int> pair_loops;
+  const std::vector<char> within = closuresWithinBudget(jobs, dups);
+  int budget_left = params_.closure_budget;
   for (int round = 0; round < 2; ++round) {
     if (round == 1)
       for (std::size_t i = 0; i < jobs.size(); ++i)
@@ -312,6 +319,10 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
     std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
     for (std::size_t i = 0; i < jobs.size(); ++i) {
       if (!jobs[i].candidate || dups[i].empty() != (round == 0)) continue;
+      if (!within[i] || (params_.closure_budget > 0 && budget_left <= 0)) {
+        skipped[i] = 2;
+        continue;
+      }
       if (round == 1 && pair_loops[trajPair(jobs[i])] >= params_.duplicate_min_pair_loops &&
           std::any_of(dups[i].begin(), dups[i].end(), [&](std::size_t d) { return results[d].ok(); })) {
         skipped[i] = 1;
@@ -319,6 +330,7 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
       }
       which.push_back(i);
       pairs.emplace_back(jobs[i].query, jobs[i].candidate->key);
+      --budget_left;
     }
     std::vector<LoopClosureResult> verified = verifyPairs(pairs);
     for (std::size_t k = 0; k < which.size(); ++k) results[which[k]] = std::move(verified[k]);
@@ -330,10 +342,14 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
       continue;
     }
     if (skipped[i]) {
-      ++stats->loops_skipped_duplicate;
+      const bool dup = skipped[i] == 1;
+      ++(dup ? stats->loops_skipped_duplicate : stats->loops_skipped_budget);
       if (attempt_hook_)
-        attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, LoopStatus::kSkippedDuplicate,
-                                  "near-duplicate of a loop found in this merge", 0, 0});
+        attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial,
+                                  dup ? LoopStatus::kSkippedDuplicate : LoopStatus::kSkippedBudget,
+                                  dup ? "near-duplicate of a loop found in this merge"
+                                      : "over this merge's closure budget",
+                                  0, 0});
       continue;
     }
     const LoopClosureResult& r = results[i];
@@ -349,6 +365,30 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
     e->id = next_loop_id_++;
     map_.loops.push_back(*e);
   }
+}
+
+std::vector<char> MapManager::closuresWithinBudget(const std::vector<LoopJob>& jobs,
+                                                   const std::vector<std::vector<std::size_t>>& dups) const {
+  std::vector<char> within(jobs.size(), 1);
+  if (params_.closure_budget <= 0) return within;
+  const auto traj = [](const KeyframeKey& k) { return TrajectoryId{k.agent, k.session}; };
+  std::map<TrajectoryPair, int> accepted;
+  for (const LoopEdge& e : map_.loops)
+    if (e.accepted) ++accepted[makeTrajectoryPair(traj(e.a), traj(e.b))];
+  // The first round is chosen; a near-duplicate follows the closures it duplicates.
+  std::vector<std::size_t> first;
+  std::vector<TrajectoryPair> pairs;
+  for (std::size_t i = 0; i < jobs.size(); ++i) {
+    if (!jobs[i].candidate || !dups[i].empty()) continue;
+    first.push_back(i);
+    pairs.push_back(makeTrajectoryPair(traj(jobs[i].query), traj(jobs[i].candidate->key)));
+  }
+  const std::vector<char> chosen = chooseWithinBudget(pairs, accepted, params_.closure_budget);
+  for (std::size_t k = 0; k < first.size(); ++k) within[first[k]] = chosen[k];
+  for (std::size_t i = 0; i < jobs.size(); ++i)
+    if (!dups[i].empty())
+      within[i] = std::any_of(dups[i].begin(), dups[i].end(), [&](std::size_t d) { return within[d] != 0; });
+  return within;
 }
 
 int MapManager::positionOf(const KeyframeKey& key) const {

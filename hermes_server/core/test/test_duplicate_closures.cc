@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <iostream>
 #include <iterator>
+#include <map>
 
 #include "hermes/server/server.h"
 #include "support/multi_agent_fixture.h"
@@ -39,10 +40,11 @@ int position(const GlobalMap& map, const KeyframeKey& k) {
   return it == t->keyframes.end() ? -1 : static_cast<int>(std::distance(t->keyframes.begin(), it));
 }
 
-Trace run(const fixture::Fixture& fx, int duplicate_neighbours, int min_pair_loops = 0) {
+Trace run(const fixture::Fixture& fx, int duplicate_neighbours, int min_pair_loops = 0, int budget = 0) {
   ServerParams params;
   params.map.duplicate_neighbours = duplicate_neighbours;
   params.map.duplicate_min_pair_loops = min_pair_loops;
+  params.map.closure_budget = budget;
   auto created = Server::create(params, HERMES_SOURCE_DIR);
   EXPECT_TRUE(created.ok()) << created.error();
   Server& server = **created;
@@ -53,7 +55,8 @@ Trace run(const fixture::Fixture& fx, int duplicate_neighbours, int min_pair_loo
     Seen s{a.query, a.candidate->key, position(server.map(), a.query),
            position(server.map(), a.candidate->key), a.status, merge};
     trace.attempts.push_back(s);
-    (a.status == LoopStatus::kSkippedDuplicate ? trace.skipped : trace.verified) += 1;
+    const bool skipped = a.status == LoopStatus::kSkippedDuplicate || a.status == LoopStatus::kSkippedBudget;
+    (skipped ? trace.skipped : trace.verified) += 1;
   });
   double now = 0;
   for (std::size_t r = 0; r < fx.agents[0].frames.size() || r < fx.agents[1].frames.size(); ++r) {
@@ -87,19 +90,24 @@ class DuplicateClosures : public ::testing::Test {
     off_ = new Trace(run(*fx, 0));
     on_ = new Trace(run(*fx, 2));
     sparse_ = new Trace(run(*fx, 2, 1000));
+    budget_ = new Trace(run(*fx, 2, 6, kBudget));
   }
   static void TearDownTestSuite() {
     delete off_;
     delete on_;
     delete sparse_;
+    delete budget_;
   }
+  static constexpr int kBudget = 4;
   static Trace* off_;
   static Trace* on_;
   static Trace* sparse_;  ///< duplicate_min_pair_loops above any merge's loops
+  static Trace* budget_;  ///< closure_budget kBudget
 };
 Trace* DuplicateClosures::off_ = nullptr;
 Trace* DuplicateClosures::on_ = nullptr;
 Trace* DuplicateClosures::sparse_ = nullptr;
+Trace* DuplicateClosures::budget_ = nullptr;
 
 TEST_F(DuplicateClosures, FewerClosuresVerifiedSameRobotsMerged) {
   ASSERT_TRUE(off_ && on_);
@@ -136,6 +144,26 @@ TEST_F(DuplicateClosures, PairsWithFewLoopsInTheMergeKeepEveryClosure) {
   EXPECT_EQ(sparse_->accepted, off_->accepted);
 }
 
+// server.map.closure_budget: no merge verifies more closures than the budget,
+// the rest are reported as skipped, and the two robots still tie.
+TEST_F(DuplicateClosures, TheBudgetCapsEveryMergeAndTheRobotsStillMerge) {
+  ASSERT_TRUE(on_ && budget_);
+  std::map<std::size_t, int> verified_in;
+  int over_budget = 0;
+  for (const Seen& s : budget_->attempts) {
+    if (s.status == LoopStatus::kSkippedBudget) ++over_budget;
+    else if (s.status != LoopStatus::kSkippedDuplicate) ++verified_in[s.merge];
+  }
+  for (const auto& [merge, n] : verified_in) EXPECT_LE(n, kBudget) << "merge " << merge;
+  EXPECT_GT(over_budget, 0) << "the fixture's merges should propose more than " << kBudget;
+  EXPECT_LT(budget_->verified, on_->verified);
+  EXPECT_EQ(budget_->merged, 2);
+  EXPECT_GE(budget_->accepted, 3u);
+  std::cout << "[ info ] budget " << kBudget << ": verified " << on_->verified << " -> "
+            << budget_->verified << ", loops accepted " << on_->accepted << " -> " << budget_->accepted
+            << "\n";
+}
+
 TEST(DuplicateClosuresParams, NegativeIsRejected) {
   MapManagerParams p;
   p.duplicate_neighbours = -1;
@@ -143,6 +171,9 @@ TEST(DuplicateClosuresParams, NegativeIsRejected) {
   p.duplicate_neighbours = 0;
   EXPECT_TRUE(p.validate().ok());
   p.duplicate_min_pair_loops = -1;
+  EXPECT_FALSE(p.validate().ok());
+  p.duplicate_min_pair_loops = 0;
+  p.closure_budget = -1;
   EXPECT_FALSE(p.validate().ok());
 }
 

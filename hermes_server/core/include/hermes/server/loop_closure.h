@@ -114,6 +114,7 @@ enum class LoopStatus {
   kTooFewInliers,
   kDegenerate,
   kSkippedDuplicate,  ///< not verified: a near-duplicate of a loop found in the same merge (map.duplicate_neighbours)
+  kSkippedBudget,     ///< not verified: over the merge's closure budget (map.closure_budget)
 };
 const char* toString(LoopStatus status);
 

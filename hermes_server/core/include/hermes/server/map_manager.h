@@ -79,6 +79,11 @@ struct MapManagerParams {
   /// least this many loops between the same two trajectories (sparse ties keep
   /// every loop; the dense ones of robots not yet placed are thinned). 0 = always.
   int duplicate_min_pair_loops = 6;
+  /// At most this many closures verified per merge (closure_budget.h): round
+  /// robin over the trajectory pairs, pairs with fewer accepted loops first; the
+  /// others are skipped (their candidates come again with later keyframes).
+  /// 0 = verify all.
+  int closure_budget = 0;
 
   MapManagerParams() { pcm.min_clique_size = 3; }
   Status read(const Config& config, const std::string& prefix = "server.");
@@ -95,6 +100,7 @@ struct MergeStats {
   int place_candidates = 0;
   int loops_attempted = 0, loops_geometric = 0;
   int loops_skipped_duplicate = 0;  ///< closures not verified: near-duplicates of a loop (duplicate_neighbours)
+  int loops_skipped_budget = 0;     ///< closures not verified: over the merge's closure_budget
   bool optimized = false;
   bool refined = false;        ///< the map refinement ran around this merge's new loops
 };
@@ -211,6 +217,11 @@ class MapManager {
   /// For each job, the earlier first-round jobs it is a near-duplicate of
   /// (duplicate_neighbours); empty = verified in the first round.
   std::vector<std::vector<std::size_t>> nearDuplicates(const std::vector<LoopJob>& jobs) const;
+  /// Per job, whether the merge's closure budget (closure_budget) lets it be
+  /// verified: the first-round jobs by chooseWithinBudget(), a near-duplicate
+  /// only with one of the jobs it duplicates.
+  std::vector<char> closuresWithinBudget(const std::vector<LoopJob>& jobs,
+                                         const std::vector<std::vector<std::size_t>>& dups) const;
   /// Place recognition for the newly stored keyframes (in order), then loop
   /// closure of all their candidates on loop_threads threads.
   void detectLoops(const std::vector<KeyframeKey>& added, MergeStats* stats);
