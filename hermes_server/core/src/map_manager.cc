@@ -43,7 +43,8 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"loop_threads", &loop_threads},
                    IntKey{"duplicate_neighbours", &duplicate_neighbours},
                    IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops},
-                   IntKey{"closure_budget", &closure_budget}})
+                   IntKey{"closure_budget", &closure_budget},
+                   IntKey{"deferred_closures", &deferred_closures}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
   for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
@@ -73,6 +74,7 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "duplicate_neighbours", duplicate_neighbours);
   out.set(p + "duplicate_min_pair_loops", duplicate_min_pair_loops);
   out.set(p + "closure_budget", closure_budget);
+  out.set(p + "deferred_closures", deferred_closures);
 }
 
 Status MapManagerParams::validate() const {
@@ -90,6 +92,7 @@ Status MapManagerParams::validate() const {
   if (duplicate_neighbours < 0) return Error{"duplicate_neighbours must be >= 0"};
   if (duplicate_min_pair_loops < 0) return Error{"duplicate_min_pair_loops must be >= 0"};
   if (closure_budget < 0) return Error{"closure_budget must be >= 0 (0 = verify all)"};
+  if (deferred_closures < 0) return Error{"deferred_closures must be >= 0"};
   return Status::Ok();
 }
 
@@ -337,34 +340,89 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
   }
   for (std::size_t i = 0; i < jobs.size(); ++i) {
     const LoopJob& j = jobs[i];
-    if (!j.candidate) {
-      if (attempt_hook_) attempt_hook_(LoopAttempt{j.query, std::nullopt, false, LoopStatus::kBadInput, "", 0, 0});
-      continue;
-    }
-    if (skipped[i]) {
-      const bool dup = skipped[i] == 1;
-      ++(dup ? stats->loops_skipped_duplicate : stats->loops_skipped_budget);
+    if (skipped[i] == 1) {
+      ++stats->loops_skipped_duplicate;
       if (attempt_hook_)
-        attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial,
-                                  dup ? LoopStatus::kSkippedDuplicate : LoopStatus::kSkippedBudget,
-                                  dup ? "near-duplicate of a loop found in this merge"
-                                      : "over this merge's closure budget",
-                                  0, 0});
+        attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, LoopStatus::kSkippedDuplicate,
+                                  "near-duplicate of a loop found in this merge", 0, 0});
       continue;
     }
-    const LoopClosureResult& r = results[i];
-    ++stats->loops_attempted;
-    if (attempt_hook_)
-      attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, r.status, r.reason, r.num_matches,
-                                r.num_inliers, r.num_prefiltered, r.ransac_iterations,
-                                r.ransac_enough_at, r.time_ms, r.prefilter_ms, r.ransac_ms,
-                                r.refine_ms});
-    std::optional<LoopEdge> e = loopEdge(j.query, j.candidate->key, r);
-    if (!e) continue;
-    ++stats->loops_geometric;
-    e->id = next_loop_id_++;
-    map_.loops.push_back(*e);
+    if (skipped[i] == 2) {
+      ++stats->loops_skipped_budget;
+      defer(j);
+      if (attempt_hook_)
+        attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, LoopStatus::kSkippedBudget,
+                                  "over this merge's closure budget: deferred", 0, 0});
+      continue;
+    }
+    takeClosure(j, results[i], stats);
   }
+}
+
+void MapManager::takeClosure(const LoopJob& j, const LoopClosureResult& r, MergeStats* stats) {
+  if (!j.candidate) {
+    if (attempt_hook_) attempt_hook_(LoopAttempt{j.query, std::nullopt, false, LoopStatus::kBadInput, "", 0, 0});
+    return;
+  }
+  ++stats->loops_attempted;
+  if (attempt_hook_)
+    attempt_hook_(LoopAttempt{j.query, j.candidate, j.spatial, r.status, r.reason, r.num_matches,
+                              r.num_inliers, r.num_prefiltered, r.ransac_iterations,
+                              r.ransac_enough_at, r.time_ms, r.prefilter_ms, r.ransac_ms,
+                              r.refine_ms});
+  std::optional<LoopEdge> e = loopEdge(j.query, j.candidate->key, r);
+  if (!e) return;
+  ++stats->loops_geometric;
+  e->id = next_loop_id_++;
+  map_.loops.push_back(*e);
+}
+
+void MapManager::defer(const LoopJob& job) {
+  if (params_.deferred_closures <= 0) {
+    ++deferred_dropped_;
+    return;
+  }
+  while (deferred_.size() >= static_cast<std::size_t>(params_.deferred_closures)) {
+    deferred_.pop_front();  // the oldest: its place has had the longest to come again
+    ++deferred_dropped_;
+  }
+  deferred_.push_back(job);
+}
+
+Expected<int> MapManager::closeDeferred(int max_closures, const std::function<double(RobotId)>& credibility) {
+  if (deferred_.empty() || max_closures <= 0) return 0;
+  const auto t_total = Clock::now();
+  const auto traj = [](const KeyframeKey& k) { return TrajectoryId{k.agent, k.session}; };
+  std::map<TrajectoryPair, int> accepted;
+  for (const LoopEdge& e : map_.loops)
+    if (e.accepted) ++accepted[makeTrajectoryPair(traj(e.a), traj(e.b))];
+  std::vector<TrajectoryPair> pairs;
+  for (const LoopJob& j : deferred_) pairs.push_back(makeTrajectoryPair(traj(j.query), traj(j.candidate->key)));
+  const std::vector<char> chosen = chooseWithinBudget(pairs, accepted, max_closures);
+  std::vector<LoopJob> jobs;
+  std::deque<LoopJob> rest;
+  for (std::size_t i = 0; i < deferred_.size(); ++i) {
+    const LoopJob& j = deferred_[i];
+    if (!chosen[i]) rest.push_back(j);
+    else if (map_.keyframe(j.query) && map_.keyframe(j.candidate->key)) jobs.push_back(j);
+  }
+  deferred_ = std::move(rest);
+  std::vector<std::pair<KeyframeKey, KeyframeKey>> verify;
+  for (const LoopJob& j : jobs) verify.emplace_back(j.query, j.candidate->key);
+  const std::vector<LoopClosureResult> results = verifyPairs(verify);
+  MergeStats stats;
+  const std::size_t loops_before = map_.loops.size();
+  for (std::size_t i = 0; i < jobs.size(); ++i) takeClosure(jobs[i], results[i], &stats);
+  if (map_.loops.size() != loops_before) {
+    auto t0 = Clock::now();
+    runPcm();
+    timings_.add("pcm", msSince(t0));
+  }
+  updateAnchoring(credibility);
+  if (graph_dirty_ && deferred_.empty())  // the last slice; a merge solves on its own when dirty
+    if (Status s = optimize(); !s) return Error{s.error()};
+  timings_.add("deferred_closures", msSince(t_total));
+  return static_cast<int>(jobs.size());
 }
 
 std::vector<char> MapManager::closuresWithinBudget(const std::vector<LoopJob>& jobs,

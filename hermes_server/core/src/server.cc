@@ -153,9 +153,13 @@ int Server::process(double now, int max_submaps) {
   // Called while the map manager anchors, which holds the intake lock then.
   const auto credibility = [this](RobotId r) { return queue_.score(r).c; };
   std::optional<ReceivedSubmap> next;
+  bool drained = false;  // no submap waits any more
   while (max_submaps < 0 || merged < max_submaps) {
     const auto t0 = std::chrono::steady_clock::now();
-    if (!takeNext(now, &next)) break;
+    if (!takeNext(now, &next)) {
+      drained = true;
+      break;
+    }
     if (!next) continue;
     const ReceivedSubmap& r = *next;
     auto stats = map_.merge(r.robot, r.submap, credibility);  // without the intake lock
@@ -177,6 +181,15 @@ int Server::process(double now, int max_submaps) {
                                std::chrono::steady_clock::now() - t0)
                                .count());
     ++popped;
+  }
+  // Closures the merges' budget deferred, one budget's worth while no submap
+  // waits (closure_budget.h): a submap never waits behind them.
+  if (drained && params_.map.closure_budget > 0 && map_.deferredClosures() > 0) {
+    auto closed = map_.closeDeferred(params_.map.closure_budget, credibility);
+    if (!closed) {
+      ++counters_.merge_errors;
+      counters_.last_error = closed.error();
+    }
   }
   (void)bookkeeper_.checkRelocalisation(now);
   if (popped > 0 && store_ && now - last_checkpoint_ >= params_.checkpoint.period_s)

@@ -67,7 +67,9 @@ void ServerWorker::loop() {
     l.unlock();
     // One submap per call: a stop request is seen between merges, and every
     // merge gets its own view.
-    while (!stopping_ && server_->pending() > 0) {
+    // Then the deferred loop closures, a budget at a time, each after any
+    // submap that came meanwhile.
+    while (!stopping_ && (server_->pending() > 0 || server_->deferredClosures() > 0)) {
       server_->process(clock_(), 1);
       publish();
     }

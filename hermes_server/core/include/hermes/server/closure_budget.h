@@ -6,18 +6,21 @@
 // trajectories they would tie, pairs with fewer accepted loops first: a pair not
 // tied yet (a robot still to be placed, two groups still apart) never waits
 // behind a pair that is tied, and every pair still gets some of the budget.
+// The closures left over are not dropped: the map manager keeps them
+// (map.deferred_closures) and verifies them, a budget at a time, while no
+// submap waits (Server::process), so a submap's merge stays short and the loops
+// still come when the server has time.
 #pragma once
 
-#include <cstdint>
 #include <map>
 #include <utility>
 #include <vector>
 
+#include "hermes/server/global_map.h"
+
 namespace hermes {
 namespace server {
 
-/// (agent, session) of one trajectory.
-using TrajectoryId = std::pair<std::uint32_t, std::uint32_t>;
 /// Two trajectories, smaller first (a loop ties them both ways).
 using TrajectoryPair = std::pair<TrajectoryId, TrajectoryId>;
 

@@ -8,6 +8,7 @@
 // accepted loops to anchored trajectories (bookkeeper.h: re-localisation).
 #pragma once
 
+#include <deque>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -84,6 +85,9 @@ struct MapManagerParams {
   /// others are skipped (their candidates come again with later keyframes).
   /// 0 = verify all.
   int closure_budget = 0;
+  /// Closures over the budget wait here (oldest dropped beyond this many) and
+  /// are verified by closeDeferred() while no submap waits.
+  int deferred_closures = 1024;
 
   MapManagerParams() { pcm.min_clique_size = 3; }
   Status read(const Config& config, const std::string& prefix = "server.");
@@ -100,7 +104,7 @@ struct MergeStats {
   int place_candidates = 0;
   int loops_attempted = 0, loops_geometric = 0;
   int loops_skipped_duplicate = 0;  ///< closures not verified: near-duplicates of a loop (duplicate_neighbours)
-  int loops_skipped_budget = 0;     ///< closures not verified: over the merge's closure_budget
+  int loops_skipped_budget = 0;     ///< closures deferred: over the merge's closure_budget
   bool optimized = false;
   bool refined = false;        ///< the map refinement ran around this merge's new loops
 };
@@ -156,6 +160,16 @@ class MapManager {
   /// left consistent (keyframes already stored stay).
   Expected<MergeStats> merge(RobotId robot, const Submap& submap,
                              const std::function<double(RobotId)>& credibility = nullptr);
+
+  /// Verifies up to `max_closures` of the closures deferred by the budget
+  /// (closure_budget; chosen as in a merge, pairs with fewer loops first), then
+  /// PCM, anchoring and, once none is left, the pose graph. Returns how many were
+  /// verified (0: none waiting).
+  Expected<int> closeDeferred(int max_closures, const std::function<double(RobotId)>& credibility = nullptr);
+  /// Closures waiting for closeDeferred(), and those dropped because more waited
+  /// than deferred_closures.
+  std::size_t deferredClosures() const { return deferred_.size(); }
+  std::size_t deferredDropped() const { return deferred_dropped_; }
 
   /// Optimises the pose graph of the anchored trajectories now: incrementally
   /// (only around what changed since the last solve, pose_graph.incremental_hops)
@@ -222,6 +236,11 @@ class MapManager {
   /// only with one of the jobs it duplicates.
   std::vector<char> closuresWithinBudget(const std::vector<LoopJob>& jobs,
                                          const std::vector<std::vector<std::size_t>>& dups) const;
+  /// A verified (or skipped) closure reported to the attempt hook and, when it
+  /// is geometrically sound, stored as a loop for PCM.
+  void takeClosure(const LoopJob& job, const LoopClosureResult& r, MergeStats* stats);
+  /// Keeps a closure over the budget for closeDeferred() (oldest dropped when full).
+  void defer(const LoopJob& job);
   /// Place recognition for the newly stored keyframes (in order), then loop
   /// closure of all their candidates on loop_threads threads.
   void detectLoops(const std::vector<KeyframeKey>& added, MergeStats* stats);
@@ -266,6 +285,8 @@ class MapManager {
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;
   std::set<std::uint64_t> accepted_;
+  std::deque<LoopJob> deferred_;  ///< closures over the budget (closure_budget.h)
+  std::size_t deferred_dropped_ = 0;
   int loops_bridged_ = 0;  ///< of accepted_, by bridging tie groups (latest PCM run)
   /// Graph nodes changed since the last solve: new keyframes, ends of loops
   /// accepted / dropped / re-measured, keyframes of newly anchored robots.

@@ -119,6 +119,9 @@ class Server {
 
   /// Submaps accepted and not merged yet (any thread).
   std::size_t pending() const;
+  /// Loop closures deferred by the merges' budget (server.map.closure_budget),
+  /// verified by process() while no submap waits (the merging thread).
+  std::size_t deferredClosures() const { return map_.deferredClosures(); }
   /// Holds the intake state still for a reader on another thread than the
   /// receiving one (briefly: onFrame() waits meanwhile). Never while calling
   /// onFrame(), process() or checkpoint() on the same thread.
