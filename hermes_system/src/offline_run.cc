@@ -488,6 +488,10 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
   // Whatever arrived is merged, and the graph is optimised once more; the robots
   // hear where they ended up.
   server_->process(now_);
+  // And the loop closures a budget deferred (server.map.closure_budget): the
+  // server catches up before the final map is read.
+  for (std::size_t n = server_->deferredClosures(); n > 0 && server_->deferredClosures() > 0; --n)
+    server_->process(now_);  // each call verifies at least one
   if (Status s = server_->mapManager().optimize(/*full=*/true); !s) return s;
   sendGlobalPoses(now_);
   for (const PendingGlobal& g : globals_) agents_[g.agent].pipeline->onGlobalPose(g.update, g.time);
