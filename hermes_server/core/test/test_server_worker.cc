@@ -33,9 +33,10 @@ const fixture::Fixture& hall() {
 
 std::vector<const std::vector<std::uint8_t>*> schedule() { return fixture::roundRobin(hall()); }
 
-std::unique_ptr<Server> makeServer(const std::string& checkpoint_dir = "") {
+std::unique_ptr<Server> makeServer(const std::string& checkpoint_dir = "", int closure_budget = 0) {
   ServerParams params;
   params.checkpoint.dir = checkpoint_dir;
+  params.map.closure_budget = closure_budget;
   auto server = Server::create(params, HERMES_SOURCE_DIR);
   EXPECT_TRUE(server.ok()) << (server ? "" : server.error());
   return server ? std::move(*server) : nullptr;
@@ -168,6 +169,31 @@ TEST(ServerWorker, ThreadedAndSynchronousEndWithTheSameMap) {
   // The view the outputs read is the map's.
   EXPECT_EQ(threaded.view()->landmarks.size(), threaded.server().map().landmarkPositionsWorld().size());
   EXPECT_EQ(sync.view()->poses.size(), threaded.view()->poses.size());
+}
+
+// server.map.closure_budget: the merge thread verifies the deferred closures
+// once no submap waits, so it goes idle only when none is left.
+TEST(ServerWorker, DeferredClosuresAreVerifiedBeforeTheThreadIdles) {
+  const auto frames = schedule();
+  std::unique_ptr<Server> server = makeServer("", 2);
+  ASSERT_TRUE(server);
+  std::atomic<int> deferred{0};
+  server->mapManager().setAttemptHook([&](const LoopAttempt& a) {
+    if (a.status == LoopStatus::kSkippedBudget) ++deferred;
+  });
+  std::atomic<double> now{0};
+  ServerWorker worker(std::move(server), ServerWorkerParams{}, [&now] { return now.load(); });
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    now = 1.0 + i;
+    EXPECT_EQ(worker.onFrame(frames[i]->data(), frames[i]->size(), nullptr, now).verdict,
+              ArrivalVerdict::kAccept);
+    worker.waitIdle();
+  }
+  worker.stop();  // the server is the test's again (waitIdle() saw the thread idle)
+  EXPECT_EQ(worker.server().deferredClosures(), 0u);
+  EXPECT_GT(deferred.load(), 0) << "a budget of 2 should defer closures on this fixture";
+  EXPECT_GT(worker.server().mapManager().loopsAccepted(), 0u);
+  EXPECT_EQ(worker.server().counters().merge_errors, 0u) << worker.server().counters().last_error;
 }
 
 TEST(ServerWorker, StopWithSubmapsQueuedLosesNone) {
