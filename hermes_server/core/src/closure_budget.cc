@@ -9,6 +9,17 @@ TrajectoryPair makeTrajectoryPair(TrajectoryId a, TrajectoryId b) {
   return a < b ? TrajectoryPair{a, b} : TrajectoryPair{b, a};
 }
 
+TrajectoryPair pairOf(const KeyframeKey& a, const KeyframeKey& b) {
+  return makeTrajectoryPair({a.agent, a.session}, {b.agent, b.session});
+}
+
+std::map<TrajectoryPair, int> acceptedLoopsPerPair(const std::vector<LoopEdge>& loops) {
+  std::map<TrajectoryPair, int> accepted;
+  for (const LoopEdge& e : loops)
+    if (e.accepted) ++accepted[pairOf(e.a, e.b)];
+  return accepted;
+}
+
 std::vector<char> chooseWithinBudget(const std::vector<TrajectoryPair>& pairs,
                                      const std::map<TrajectoryPair, int>& accepted, int budget) {
   const std::size_t n = pairs.size();

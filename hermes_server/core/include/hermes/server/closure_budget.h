@@ -25,6 +25,10 @@ namespace server {
 using TrajectoryPair = std::pair<TrajectoryId, TrajectoryId>;
 
 TrajectoryPair makeTrajectoryPair(TrajectoryId a, TrajectoryId b);
+/// The pair of the trajectories of two keyframes.
+TrajectoryPair pairOf(const KeyframeKey& a, const KeyframeKey& b);
+/// Accepted loops per trajectory pair.
+std::map<TrajectoryPair, int> acceptedLoopsPerPair(const std::vector<LoopEdge>& loops);
 
 /// Which closures to verify: `pairs[i]` is the trajectory pair of closure i (in
 /// the order proposed), `accepted` the loops accepted so far per pair (missing =

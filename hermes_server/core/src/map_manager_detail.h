@@ -1,0 +1,22 @@
+// Helpers shared by the map manager's source files (map_manager.cc: storing,
+// PCM, anchoring, pose graph; map_manager_loops.cc: loop detection).
+#pragma once
+
+#include <chrono>
+
+#include "hermes/server/global_map.h"
+
+namespace hermes {
+namespace server {
+namespace map_manager_detail {
+
+using Clock = std::chrono::steady_clock;
+inline double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+inline KeyframeKey keyOf(const TrajectoryMap& t, KeyframeId id) { return KeyframeKey{t.agent, t.session, id}; }
+
+}  // namespace map_manager_detail
+}  // namespace server
+}  // namespace hermes
