@@ -306,6 +306,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   std::vector<int> corr_landmark, corr_keypoint;
   auto solve = [&](bool refine_first) {
     c = Correspondences();
+    c.baseline = baseline_;
     corr_landmark.clear();
     corr_keypoint.clear();
     for (std::size_t i = 0; i < match.size(); ++i) {
@@ -314,6 +315,9 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
       c.p_W.push_back(views[i].p_W);
       c.uv.push_back(Vec2(k.u, k.v));
       c.sigma_px.push_back(fs.scales[k.octave]);
+      // The right image's column, as local BA uses it (none without a baseline).
+      if (baseline_ > 0)
+        c.u_right.push_back(k.depth > 0 ? std::max(0.0, k.u - K_.fx * baseline_ / k.depth) : -1.0);
       corr_landmark.push_back(int(local[i]));
       corr_keypoint.push_back(match[i]);
     }

@@ -40,6 +40,34 @@ Correspondences makeScene(std::mt19937& rng, const SE3& T_C_W, const PinholeIntr
   return c;
 }
 
+/// Adds each point's right-image column (baseline b, pixel noise) to c.
+void addRightColumns(std::mt19937& rng, const SE3& T_C_W, const PinholeIntrinsics& K, double b,
+                     double noise_px, Correspondences* c) {
+  std::normal_distribution<double> noise(0, noise_px);
+  c->baseline = b;
+  for (std::size_t i = 0; i < c->size(); ++i) {
+    const Vec3 p = T_C_W * c->p_W[i];
+    c->u_right.push_back(K.fx * (p.x() - b) / p.z() + K.cx + noise(rng));
+  }
+}
+
+/// Left (u, v) and right column of one stereo observation as one 3-vector, for
+/// a Ceres reference solve under a single Huber loss (as refinePose weighs them).
+struct StereoResidual {
+  ReprojectionResidual left;
+  double u_right, b, fx, cx, inv_sigma;
+  template <class T>
+  bool operator()(const T* q, const T* t, T* r) const {
+    left(q, t, r);
+    const Eigen::Quaternion<T> q_C_W(q[3], q[0], q[1], q[2]);
+    const Eigen::Matrix<T, 3, 1> p =
+        q_C_W * left_p.cast<T>() + Eigen::Matrix<T, 3, 1>(t[0], t[1], t[2]);
+    r[2] = (T(fx) * (p.x() - T(b)) / p.z() + T(cx) - T(u_right)) * T(inv_sigma);
+    return true;
+  }
+  Vec3 left_p;
+};
+
 }  // namespace
 
 TEST(PoseEstimation, AutodiffJacobianMatchesCentralDifferences) {
@@ -179,4 +207,119 @@ TEST(PoseEstimation, BadInputIsAnError) {
   // All outliers: RANSAC cannot find a consensus.
   c = makeScene(rng, SE3(), K, 60, 0.5, 1.0, &is_out);
   EXPECT_FALSE(estimatePose(c, K, PoseEstimationParams()).ok());
+}
+
+TEST(PoseEstimation, StereoRefinementReachesTheCeresOptimumOfTheSameRobustCost) {
+  // As above with a right-image column on two thirds of the observations: the
+  // hand-written Jacobian of the third row must lead to Ceres' minimum.
+  std::mt19937 rng(21);
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
+  const double b = 0.11;
+  for (int trial = 0; trial < 5; ++trial) {
+    const SE3 T_C_W = randomPose(rng, 0.5, 0.5);
+    std::vector<bool> is_out;
+    Correspondences c = makeScene(rng, T_C_W, K, 150, 0.7, 0.3, &is_out);
+    addRightColumns(rng, T_C_W, K, b, 0.7, &c);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      c.sigma_px.push_back(i % 3 == 0 ? 1.44 : 1.0);
+      if (i % 3 == 1) c.u_right[i] = -1;  // no stereo match
+    }
+    const SE3 init =
+        SE3::exp((Vec6() << 0.03, -0.02, 0.01, 0.01, -0.015, 0.02).finished()) * T_C_W;
+    PoseEstimationParams p;
+    p.refine_rounds = 1;
+    p.iterations_per_round = 100;
+    auto est = refinePose(c, K, init, p);
+    ASSERT_TRUE(est.ok()) << est.error();
+
+    const Quat q0 = init.quat();
+    double qa[4] = {q0.x(), q0.y(), q0.z(), q0.w()};
+    double ta[3] = {init.translation().x(), init.translation().y(), init.translation().z()};
+    ceres::Problem::Options po;
+    po.manifold_ownership = ceres::TAKE_OWNERSHIP;
+    ceres::Problem problem(po);
+    problem.AddParameterBlock(qa, 4, new ceres::EigenQuaternionManifold());
+    problem.AddParameterBlock(ta, 3);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      ceres::LossFunction* loss = new ceres::HuberLoss(p.huber_px);
+      if (c.u_right[i] < 0) {
+        problem.AddResidualBlock(
+            ReprojectionResidual::create(c.uv[i], c.p_W[i], K, c.sigma_px[i]), loss, qa, ta);
+        continue;
+      }
+      auto* f = new StereoResidual{ReprojectionResidual(c.uv[i], c.p_W[i], K, c.sigma_px[i]),
+                                   c.u_right[i], b, K.fx, K.cx, 1.0 / c.sigma_px[i], c.p_W[i]};
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<StereoResidual, 3, 4, 3>(f), loss,
+                               qa, ta);
+    }
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = 100;
+    so.function_tolerance = 1e-12;
+    so.parameter_tolerance = 1e-12;
+    so.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    const SE3 ref(Quat(qa[3], qa[0], qa[1], qa[2]), Vec3(ta[0], ta[1], ta[2]));
+    EXPECT_LT(translationalDistance(est->T_C_W, ref), 1e-6) << "trial " << trial;
+    EXPECT_LT(angularDistance(est->T_C_W, ref), 1e-7) << "trial " << trial;
+  }
+}
+
+TEST(PoseEstimation, RightColumnMakesThePoseMoreAccurate) {
+  // 20 points 1-6 m away in an 80 x 80 px patch (a textured spot seen through a
+  // narrow view), 1 px noise on every column, 100 poses refined from the truth:
+  // the right column's depth makes the translation and the rotation better on
+  // average (measured 1.68 -> 1.31 cm, 0.37 -> 0.29 deg).
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<double> ux(K.cx - 40, K.cx + 40), uy(K.cy - 40, K.cy + 40),
+      uz(1.0, 6.0);
+  std::normal_distribution<double> noise(0, 1.0);
+  PoseEstimationParams mono;
+  mono.stereo_residual = false;
+  double t_mono = 0, t_stereo = 0, r_mono = 0, r_stereo = 0;
+  for (int trial = 0; trial < 100; ++trial) {
+    const SE3 T_C_W = randomPose(rng, 0.3, 0.5);
+    Correspondences c;
+    for (int i = 0; i < 20; ++i) {
+      const Vec2 uv(ux(rng), uy(rng));
+      const double z = uz(rng);
+      c.p_W.push_back(T_C_W.inverse() *
+                      Vec3((uv.x() - K.cx) / K.fx * z, (uv.y() - K.cy) / K.fy * z, z));
+      c.uv.push_back(uv + Vec2(noise(rng), noise(rng)));
+    }
+    addRightColumns(rng, T_C_W, K, 0.11, 1.0, &c);
+    auto a = refinePose(c, K, T_C_W, mono);
+    auto b = refinePose(c, K, T_C_W, PoseEstimationParams());
+    ASSERT_TRUE(a.ok() && b.ok()) << "trial " << trial;
+    t_mono += translationalDistance(a->T_C_W, T_C_W) / 100;
+    t_stereo += translationalDistance(b->T_C_W, T_C_W) / 100;
+    r_mono += angularDistance(a->T_C_W, T_C_W) * 180 / M_PI / 100;
+    r_stereo += angularDistance(b->T_C_W, T_C_W) * 180 / M_PI / 100;
+  }
+  std::printf("narrow view, mean error: left only %.2f cm %.3f deg, with the right column "
+              "%.2f cm %.3f deg\n", 100 * t_mono, r_mono, 100 * t_stereo, r_stereo);
+  EXPECT_LT(t_stereo, 0.9 * t_mono);
+  EXPECT_LT(r_stereo, 0.9 * r_mono);
+}
+
+TEST(PoseEstimation, AWrongRightColumnMakesAnOutlier) {
+  std::mt19937 rng(9);
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
+  const SE3 T_C_W = randomPose(rng, 0.3, 0.3);
+  std::vector<bool> is_out;
+  Correspondences c = makeScene(rng, T_C_W, K, 100, 0.3, 0.0, &is_out);
+  addRightColumns(rng, T_C_W, K, 0.11, 0.3, &c);
+  c.u_right[7] -= 12;  // a wrong stereo match: the left observation is right
+  auto with = refinePose(c, K, T_C_W, PoseEstimationParams());
+  PoseEstimationParams mono;
+  mono.stereo_residual = false;
+  auto without = refinePose(c, K, T_C_W, mono);
+  ASSERT_TRUE(with.ok() && without.ok());
+  EXPECT_FALSE(with->inlier[7]);
+  EXPECT_TRUE(without->inlier[7]);
+  // Right columns without a baseline are refused.
+  c.baseline = 0;
+  EXPECT_FALSE(refinePose(c, K, T_C_W, PoseEstimationParams()).ok());
 }

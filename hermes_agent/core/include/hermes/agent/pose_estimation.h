@@ -3,7 +3,10 @@
 // refinement: Levenberg-Marquardt on SE(3) with analytic Jacobians (6 unknowns,
 // so no general solver is needed; the test checks it against a Ceres solve of
 // the same cost), Huber loss on the reprojection error, observations whose
-// error exceeds a chi-square bound are dropped between rounds.
+// error exceeds a chi-square bound are dropped between rounds. A keypoint with a
+// stereo (or RGB-D) depth also constrains the right image's column, as in local
+// BA: that pins the translation where the left image alone leaves a valley
+// (distant points seen in a narrow view trade translation for rotation).
 #pragma once
 
 #include <string>
@@ -24,6 +27,8 @@ struct PoseEstimationParams {
   double ransac_confidence = 0.999;
   double huber_px = 2.45;            ///< Huber width on sigma-normalised error (sqrt(5.991))
   double chi2_threshold = 5.991;     ///< 95 % for 2 DoF, on sigma-normalised squared error
+  double chi2_threshold_stereo = 7.815;  ///< 95 % for 3 DoF (observations with a right column)
+  bool stereo_residual = true;       ///< use Correspondences::u_right where given
   int refine_rounds = 4;             ///< optimise, reclassify outliers, repeat
   int iterations_per_round = 10;
   int min_inliers = 12;
@@ -39,6 +44,10 @@ struct Correspondences {
   std::vector<Vec3> p_W;
   std::vector<Vec2> uv;
   std::vector<double> sigma_px;  ///< empty = 1 px for all
+  /// Right-image column of each observation (u - fx * baseline / depth), < 0 =
+  /// none; empty = none for all. Needs baseline > 0.
+  std::vector<double> u_right;
+  double baseline = 0;           ///< stereo baseline [m] (RGB-D: a virtual one)
   std::size_t size() const { return p_W.size(); }
 };
 
