@@ -21,6 +21,21 @@ void MapManager::save(ByteWriter* w) const {
   w->pod(static_cast<std::int32_t>(graph_diag_.solves));
   w->pod(static_cast<std::int32_t>(graph_diag_.not_converged));
   saveTimings(w, timings_);
+  // The closures a budget deferred: a restarted server still verifies them.
+  w->count(deferred_.size());
+  for (const LoopJob& j : deferred_) {
+    w->key(j.query);
+    const PlaceCandidate& c = *j.candidate;  // a deferred closure always has one
+    w->key(c.key);
+    w->pod(c.score);
+    w->pod(c.normalized_score);
+    w->pod(c.island_score);
+    w->pod(c.island_first);
+    w->pod(c.island_last);
+    w->pod(static_cast<std::int32_t>(c.island_size));
+    w->flag(j.spatial);
+  }
+  w->pod(static_cast<std::uint64_t>(deferred_dropped_));
 }
 
 Status MapManager::load(ByteReader* r) {
@@ -54,6 +69,24 @@ Status MapManager::load(ByteReader* r) {
   if (has_world && !map_.trajectories.count(world))
     return Error{"map manager: the world trajectory is not in the map"};
   if (!loadTimings(r, &timings_)) return Error{"map manager: timings damaged"};
+  // Deferred closures may name keyframes gone since (they are skipped when verified).
+  if (!r->count(&n, 3 * sizeof(KeyframeKey)))
+    return Error{"map manager: bad deferred closure count"};
+  for (std::uint64_t i = 0; i < n; ++i) {
+    LoopJob j;
+    PlaceCandidate c;
+    std::int32_t island = 0;
+    if (!r->key(&j.query) || !r->key(&c.key) || !r->pod(&c.score) || !r->pod(&c.normalized_score) ||
+        !r->pod(&c.island_score) || !r->pod(&c.island_first) || !r->pod(&c.island_last) ||
+        !r->pod(&island) || !r->flag(&j.spatial))
+      return Error{"map manager: deferred closure " + std::to_string(i) + " truncated"};
+    c.island_size = island;
+    j.candidate = c;
+    deferred_.push_back(j);
+  }
+  std::uint64_t dropped = 0;
+  if (!r->pod(&dropped)) return Error{"map manager: deferred closure counters damaged"};
+  deferred_dropped_ = dropped;
   for (const LoopEdge& e : map_.loops) {
     if (e.id >= next_loop_id_) return Error{"map manager: loop id beyond the next id"};
     if (e.accepted) accepted_.insert(e.id);

@@ -95,23 +95,27 @@ class DuplicateClosures : public ::testing::Test {
                                     {kGt + "MH_02_easy.txt", 0.0, 15.0, -1}},
                                    options);
     ASSERT_TRUE(fx.ok()) << fx.error();
+    fx_ = new fixture::Fixture(*fx);
     off_ = new Trace(run(*fx, 0));
     on_ = new Trace(run(*fx, 2));
     sparse_ = new Trace(run(*fx, 2, 1000));
     budget_ = new Trace(run(*fx, 2, 6, kBudget));
   }
   static void TearDownTestSuite() {
+    delete fx_;
     delete off_;
     delete on_;
     delete sparse_;
     delete budget_;
   }
   static constexpr int kBudget = 4;
+  static fixture::Fixture* fx_;
   static Trace* off_;
   static Trace* on_;
   static Trace* sparse_;  ///< duplicate_min_pair_loops above any merge's loops
   static Trace* budget_;  ///< closure_budget kBudget
 };
+fixture::Fixture* DuplicateClosures::fx_ = nullptr;
 Trace* DuplicateClosures::off_ = nullptr;
 Trace* DuplicateClosures::on_ = nullptr;
 Trace* DuplicateClosures::sparse_ = nullptr;
@@ -179,6 +183,42 @@ TEST_F(DuplicateClosures, TheBudgetCapsEveryMergeAndDefersTheRest) {
   std::cout << "[ info ] budget " << kBudget << ": verified " << on_->verified << " -> "
             << budget_->verified << " (" << over_budget << " deferred), loops accepted "
             << on_->accepted << " -> " << budget_->accepted << "\n";
+}
+
+// A checkpoint holds the closures the budget deferred: a server restored from
+// it verifies them and ends with the loops of the one that never stopped.
+TEST_F(DuplicateClosures, DeferredClosuresSurviveACheckpoint) {
+  ASSERT_TRUE(fx_);
+  ServerParams params;
+  params.map.duplicate_neighbours = 2;
+  params.map.duplicate_min_pair_loops = 6;
+  params.map.closure_budget = kBudget;
+  auto a = Server::create(params, HERMES_SOURCE_DIR);
+  ASSERT_TRUE(a.ok()) << a.error();
+  double now = 0;
+  for (std::size_t r = 0; r < fx_->agents[0].frames.size() || r < fx_->agents[1].frames.size(); ++r)
+    for (const auto& agent : fx_->agents) {
+      if (r >= agent.frames.size()) continue;
+      (*a)->onFrame(agent.frames[r].data(), agent.frames[r].size(), nullptr, now += 1);
+      (*a)->process(now, 1);  // merges only: every closure over the budget waits
+    }
+  const std::size_t waiting = (*a)->deferredClosures();
+  ASSERT_GT(waiting, 0u);
+  auto b = Server::create(params, HERMES_SOURCE_DIR);
+  ASSERT_TRUE(b.ok()) << b.error();
+  ASSERT_TRUE((*b)->loadState((*a)->saveState()));
+  EXPECT_EQ((*b)->deferredClosures(), waiting);
+  for (Server* s : {a->get(), b->get()}) {
+    double t = now;
+    for (int idle = 0; idle < 1000 && s->deferredClosures() > 0; ++idle) s->process(t += 1, -1);
+    EXPECT_EQ(s->deferredClosures(), 0u);
+    EXPECT_EQ(s->counters().merge_errors, 0u) << s->counters().last_error;
+  }
+  EXPECT_GT((*a)->mapManager().loopsAccepted(), 0u);
+  EXPECT_EQ((*b)->mapManager().loopsAccepted(), (*a)->mapManager().loopsAccepted());
+  std::cout << "[ info ] " << waiting << " closures deferred at the checkpoint; loops accepted "
+            << (*a)->mapManager().loopsAccepted() << " (uninterrupted) / "
+            << (*b)->mapManager().loopsAccepted() << " (restored)\n";
 }
 
 TEST(DuplicateClosuresParams, NegativeIsRejected) {

@@ -32,7 +32,8 @@ namespace server {
 
 /// 2: per-session anchoring and re-localisation state (bookkeeper).
 /// 3: global map version 3 inside (loop keypoint pairs, refined edges).
-constexpr std::uint32_t kCheckpointVersion = 3;
+/// 4: the loop closures deferred by server.map.closure_budget.
+constexpr std::uint32_t kCheckpointVersion = 4;
 constexpr std::uint32_t kJournalVersion = 1;
 
 struct CheckpointParams {
