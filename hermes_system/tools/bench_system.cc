@@ -282,6 +282,12 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   std::int64_t held_peak = 0;
   for (const AgentMetrics& a : r.metrics.per_agent) held_peak += a.held_bytes_peak.value_or(0);
   j["server_held_bytes_peak_sum"] = held_peak;
+  // What the slowest merges spent their time on (the p95 of "submap").
+  nlohmann::json slow = nlohmann::json::array();
+  for (const server::Server::MergeBreakdown& m : (*run)->server().slowestMerges())
+    slow.push_back({{"t_s", m.now}, {"robot", m.robot}, {"seq", m.seq}, {"keyframes", m.keyframes},
+                    {"loops_attempted", m.loops_attempted}, {"stage_ms", m.stage_ms}});
+  j["server_slowest_merges"] = slow;
   j["load_avg_1min"] = loadAverage();
   if (v == "false_candidates") j["injected_false_candidates"] = injected;
   double lost = 0;

@@ -423,29 +423,40 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
     return Error{"merge of submap seq " + std::to_string(submap.header.seq) + " from " +
                  hermes::toString(submap.header.agent) + ": " + v};
   MergeStats stats;
-  std::vector<KeyframeKey> added, extended;
+  // A stage's wall time goes to the run's statistics and to this merge's breakdown.
   auto t0 = Clock::now();
+  const auto stage = [&](const char* name) {
+    const double ms = msSince(t0);
+    timings_.add(name, ms);
+    stats.stage_ms[name] += ms;
+    t0 = Clock::now();
+  };
+  std::vector<KeyframeKey> added, extended;
   storeSubmap(robot, submap, &added, &extended, &stats);
-  timings_.add("store", msSince(t0));
+  stage("store");
   stats.keyframes = static_cast<int>(added.size());
   stats.landmarks = static_cast<int>(submap.landmarks.size());
   const std::size_t loops_before = map_.loops.size();
   std::set<std::uint64_t> accepted_before;  // only the refinement needs them (a copy per merge)
   if (params_.refinement.enabled) accepted_before = accepted_;
+  t0 = Clock::now();
   extendKeyframes(extended, &stats);
+  stage("extend");
   detectLoops(added, &stats);
+  stage("detect_loops");
   if (stats.loops_replaced > 0) graph_dirty_ = true;  // a loop's measurement changed
   if (map_.loops.size() != loops_before || stats.loops_replaced > 0) {
-    t0 = Clock::now();
     runPcm();
-    timings_.add("pcm", msSince(t0));
+    stage("pcm");
   }
   updateAnchoring(credibility);
+  stage("anchoring");
   ++merges_since_optimize_;
   if (graph_dirty_ || (params_.optimize_every_submaps > 0 &&
                        merges_since_optimize_ >= params_.optimize_every_submaps)) {
     if (Status s = optimize(); !s) return Error{s.error()};
     stats.optimized = true;
+    stage("optimize");
   }
   if (params_.refinement.enabled) {  // bundle adjustment around the newly accepted loops
     std::vector<std::uint64_t> fresh;
@@ -454,13 +465,14 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
     if (!fresh.empty()) {
       t0 = Clock::now();
       refine_diag_.last = refineAroundLoops(&map_, fresh, params_.refinement);
-      timings_.add("map_refinement", msSince(t0));
+      stage("map_refinement");
       refine_diag_.runs += refine_diag_.last.ran;
       refine_diag_.applied += refine_diag_.last.applied;
       stats.refined = refine_diag_.last.applied;
     }
   }
-  timings_.add("merge_total", msSince(t_total));
+  stats.stage_ms["total"] = msSince(t_total);
+  timings_.add("merge_total", stats.stage_ms["total"]);
   return stats;
 }
 

@@ -2,6 +2,7 @@
 
 #include "hermes/core/frame_auth.h"
 
+#include <algorithm>
 #include <chrono>
 
 namespace hermes {
@@ -172,6 +173,8 @@ int Server::process(double now, int max_submaps) {
       counters_.keyframes_extended += static_cast<std::size_t>(stats->keyframes_extended);
       counters_.extensions_unknown += static_cast<std::size_t>(stats->extensions_unknown);
       counters_.loops_reverified += static_cast<std::size_t>(stats->loops_reverified);
+      noteSlowMerge({now, r.robot, r.submap.header.seq, stats->keyframes, stats->loops_attempted,
+                     stats->stage_ms});
     }
     {
       std::lock_guard<std::mutex> lock(intake_mu_);
@@ -195,6 +198,18 @@ int Server::process(double now, int max_submaps) {
   if (popped > 0 && store_ && now - last_checkpoint_ >= params_.checkpoint.period_s)
     (void)checkpoint(now);  // counted and kept in durability(); the journal still holds everything
   return merged;
+}
+
+void Server::noteSlowMerge(MergeBreakdown m) {
+  const auto total = [](const MergeBreakdown& b) {
+    auto it = b.stage_ms.find("total");
+    return it == b.stage_ms.end() ? 0.0 : it->second;
+  };
+  if (slowest_.size() >= kSlowestMerges && total(m) <= total(slowest_.back())) return;
+  auto at = std::find_if(slowest_.begin(), slowest_.end(),
+                         [&](const MergeBreakdown& b) { return total(m) > total(b); });
+  slowest_.insert(at, std::move(m));
+  if (slowest_.size() > kSlowestMerges) slowest_.pop_back();
 }
 
 TimingStats Server::timings() const {

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <deque>
+#include <map>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -107,6 +108,9 @@ struct MergeStats {
   int loops_skipped_budget = 0;     ///< closures deferred: over the merge's closure_budget
   bool optimized = false;
   bool refined = false;        ///< the map refinement ran around this merge's new loops
+  /// Wall time of this merge per stage [ms]: store, extend, detect_loops (place
+  /// recognition + closures), pcm, anchoring, optimize, map_refinement, total.
+  std::map<std::string, double> stage_ms;
 };
 
 /// What the map refinement (map_refinement.h) did so far.

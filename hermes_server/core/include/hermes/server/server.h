@@ -138,6 +138,18 @@ class Server {
   /// Map-manager stages plus "submap" (whole merge incl. queue handling) and
   /// "checkpoint" (state encoded and written) [ms].
   TimingStats timings() const;
+  /// One merge's wall time per stage (MergeStats::stage_ms), kept for the
+  /// slowest merges: what a long p95 of "submap" is made of.
+  struct MergeBreakdown {
+    double now = 0;  ///< process() time [s]
+    RobotId robot = 0;
+    std::uint64_t seq = 0;
+    int keyframes = 0, loops_attempted = 0;
+    std::map<std::string, double> stage_ms;
+  };
+  /// The kSlowestMerges slowest merges so far, slowest first.
+  const std::vector<MergeBreakdown>& slowestMerges() const { return slowest_; }
+  static constexpr std::size_t kSlowestMerges = 5;
   const ServerParams& params() const { return params_; }
 
   /// Writes a checkpoint now (clean shutdown; process() does it after merges).
@@ -170,6 +182,8 @@ class Server {
   std::vector<std::uint8_t> encodeState(std::vector<SubmapHeader>* covers);
   /// The intake state's parts of the body, before and after the map.
   void saveIntake(ByteWriter* head, ByteWriter* tail) const;
+  /// Keeps m among slowest_ when it is one of the kSlowestMerges slowest.
+  void noteSlowMerge(MergeBreakdown m);
   /// head + the map (read by the merging thread, no lock) + tail.
   std::vector<std::uint8_t> withMap(ByteWriter head, const ByteWriter& tail) const;
 
@@ -184,6 +198,7 @@ class Server {
   std::uint64_t next_handle_ = 0;
   ServerCounters counters_;
   TimingStats timings_;
+  std::vector<MergeBreakdown> slowest_;
   std::optional<CheckpointStore> store_;
   std::vector<SubmapHeader> journaled_;  ///< journal entries no checkpoint covers yet
   std::deque<std::vector<SubmapHeader>> covered_;  ///< entries first covered by each newer checkpoint
