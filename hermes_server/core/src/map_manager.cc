@@ -184,28 +184,47 @@ void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, Merge
       if (ext.count(KeyframeKey{key.agent, key.session, n->id})) return true;
     return false;
   };
-  std::vector<std::size_t> again;
+  std::vector<std::uint64_t> again;
   std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
-  for (std::size_t i = 0; i < map_.loops.size(); ++i)
-    if (inRig(map_.loops[i].a) || inRig(map_.loops[i].b)) {
-      again.push_back(i);
-      pairs.emplace_back(map_.loops[i].a, map_.loops[i].b);
+  for (const LoopEdge& loop : map_.loops)
+    if (inRig(loop.a) || inRig(loop.b)) {
+      again.push_back(loop.id);
+      pairs.emplace_back(loop.a, loop.b);
     }
-  const std::vector<LoopClosureResult> results = verifyPairs(pairs);
-  for (std::size_t k = 0; k < again.size(); ++k) {
-    LoopEdge& loop = map_.loops[again[k]];
-    ++stats->loops_reverified;
-    std::optional<LoopEdge> e = loopEdge(loop.a, loop.b, results[k]);
-    if (!e || e->inliers < loop.inliers) continue;  // keep the earlier measurement
-    e->id = loop.id;
-    e->accepted = loop.accepted;
-    map_.refined_edges.erase({loop.a, loop.b});  // a new measurement replaces the refined one
-    loop = *e;
-    touched_.insert(loop.a);
-    touched_.insert(loop.b);
-    pcm_cache_.forget(loop.id);
-    ++stats->loops_replaced;
+  if (params_.closure_budget > 0) {  // under a budget: measured again while no submap waits
+    std::set<std::uint64_t> waiting;
+    for (const LoopJob& j : deferred_)
+      if (j.reverify) waiting.insert(*j.reverify);
+    for (std::size_t k = 0; k < again.size(); ++k) {
+      if (waiting.count(again[k])) continue;
+      PlaceCandidate c;
+      c.key = pairs[k].second;
+      defer(LoopJob{pairs[k].first, c, false, again[k]});
+      ++stats->loops_reverify_deferred;
+    }
+    return;
   }
+  const std::vector<LoopClosureResult> results = verifyPairs(pairs);
+  for (std::size_t k = 0; k < again.size(); ++k) takeReverification(again[k], results[k], stats);
+}
+
+void MapManager::takeReverification(std::uint64_t loop_id, const LoopClosureResult& r,
+                                    MergeStats* stats) {
+  auto it = std::find_if(map_.loops.begin(), map_.loops.end(),
+                         [&](const LoopEdge& e) { return e.id == loop_id; });
+  if (it == map_.loops.end()) return;  // gone since it was deferred
+  LoopEdge& loop = *it;
+  ++stats->loops_reverified;
+  std::optional<LoopEdge> e = loopEdge(loop.a, loop.b, r);
+  if (!e || e->inliers < loop.inliers) return;  // keep the earlier measurement
+  e->id = loop.id;
+  e->accepted = loop.accepted;
+  map_.refined_edges.erase({loop.a, loop.b});  // a new measurement replaces the refined one
+  loop = *e;
+  touched_.insert(loop.a);
+  touched_.insert(loop.b);
+  pcm_cache_.forget(loop.id);
+  ++stats->loops_replaced;
 }
 
 void MapManager::runPcm() {

@@ -34,6 +34,8 @@ void MapManager::save(ByteWriter* w) const {
     w->pod(c.island_last);
     w->pod(static_cast<std::int32_t>(c.island_size));
     w->flag(j.spatial);
+    w->flag(j.reverify.has_value());
+    w->pod(j.reverify.value_or(0));
   }
   w->pod(static_cast<std::uint64_t>(deferred_dropped_));
 }
@@ -76,11 +78,14 @@ Status MapManager::load(ByteReader* r) {
     LoopJob j;
     PlaceCandidate c;
     std::int32_t island = 0;
+    bool reverify = false;
+    std::uint64_t loop_id = 0;
     if (!r->key(&j.query) || !r->key(&c.key) || !r->pod(&c.score) || !r->pod(&c.normalized_score) ||
         !r->pod(&c.island_score) || !r->pod(&c.island_first) || !r->pod(&c.island_last) ||
-        !r->pod(&island) || !r->flag(&j.spatial))
+        !r->pod(&island) || !r->flag(&j.spatial) || !r->flag(&reverify) || !r->pod(&loop_id))
       return Error{"map manager: deferred closure " + std::to_string(i) + " truncated"};
     c.island_size = island;
+    if (reverify) j.reverify = loop_id;
     j.candidate = c;
     deferred_.push_back(j);
   }

@@ -226,7 +226,8 @@ void MapManager::defer(const LoopJob& job) {
   deferred_.push_back(job);
 }
 
-Expected<int> MapManager::closeDeferred(int max_closures, const std::function<double(RobotId)>& credibility) {
+Expected<int> MapManager::closeDeferred(int max_closures, const std::function<double(RobotId)>& credibility,
+                                        MergeStats* out) {
   if (deferred_.empty() || max_closures <= 0) return 0;
   const auto t_total = Clock::now();
   const std::map<TrajectoryPair, int> accepted = acceptedLoopsPerPair(map_.loops);
@@ -244,10 +245,15 @@ Expected<int> MapManager::closeDeferred(int max_closures, const std::function<do
   std::vector<std::pair<KeyframeKey, KeyframeKey>> verify;
   for (const LoopJob& j : jobs) verify.emplace_back(j.query, j.candidate->key);
   const std::vector<LoopClosureResult> results = verifyPairs(verify);
-  MergeStats stats;
+  MergeStats local;
+  MergeStats& stats = out ? *out : local;
   const std::size_t loops_before = map_.loops.size();
-  for (std::size_t i = 0; i < jobs.size(); ++i) takeClosure(jobs[i], results[i], &stats);
-  if (map_.loops.size() != loops_before) {
+  for (std::size_t i = 0; i < jobs.size(); ++i) {
+    if (jobs[i].reverify) takeReverification(*jobs[i].reverify, results[i], &stats);
+    else takeClosure(jobs[i], results[i], &stats);
+  }
+  if (stats.loops_replaced > 0) graph_dirty_ = true;  // a loop's measurement changed
+  if (map_.loops.size() != loops_before || stats.loops_replaced > 0) {
     auto t0 = Clock::now();
     runPcm();
     timings_.add("pcm", msSince(t0));

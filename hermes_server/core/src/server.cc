@@ -173,6 +173,7 @@ int Server::process(double now, int max_submaps) {
       counters_.keyframes_extended += static_cast<std::size_t>(stats->keyframes_extended);
       counters_.extensions_unknown += static_cast<std::size_t>(stats->extensions_unknown);
       counters_.loops_reverified += static_cast<std::size_t>(stats->loops_reverified);
+      counters_.loops_reverify_deferred += static_cast<std::size_t>(stats->loops_reverify_deferred);
       noteSlowMerge({now, r.robot, r.submap.header.seq, stats->keyframes, stats->loops_attempted,
                      stats->stage_ms});
     }
@@ -188,7 +189,9 @@ int Server::process(double now, int max_submaps) {
   // Closures the merges' budget deferred, one budget's worth while no submap
   // waits (closure_budget.h): a submap never waits behind them.
   if (drained && params_.map.closure_budget > 0 && map_.deferredClosures() > 0) {
-    auto closed = map_.closeDeferred(params_.map.closure_budget, credibility);
+    MergeStats stats;
+    auto closed = map_.closeDeferred(params_.map.closure_budget, credibility, &stats);
+    counters_.loops_reverified += static_cast<std::size_t>(stats.loops_reverified);
     if (!closed) {
       ++counters_.merge_errors;
       counters_.last_error = closed.error();

@@ -19,7 +19,7 @@ namespace {
 void saveCounters(ByteWriter* w, const ServerCounters& c, const ReceiverStats& r,
                   const DurabilityStats& d) {
   for (std::size_t v : {c.merged, c.merge_errors, c.keyframes_extended, c.extensions_unknown,
-                        c.loops_reverified})
+                        c.loops_reverified, c.loops_reverify_deferred})
     w->count(v);
   w->text(c.last_error);
   for (std::size_t v : {r.frames, r.accepted, r.duplicates, r.stale, r.rejected, r.bytes})
@@ -40,7 +40,7 @@ bool loadCounters(ByteReader* r, ServerCounters* c, ReceiverStats* rs, Durabilit
     return true;
   };
   return all({&c->merged, &c->merge_errors, &c->keyframes_extended, &c->extensions_unknown,
-              &c->loops_reverified}) &&
+              &c->loops_reverified, &c->loops_reverify_deferred}) &&
          r->text(&c->last_error) &&
          all({&rs->frames, &rs->accepted, &rs->duplicates, &rs->stale, &rs->rejected, &rs->bytes}) &&
          all({&d->checkpoints, &d->checkpoint_errors, &d->last_checkpoint_bytes, &d->journal_errors,

@@ -52,7 +52,12 @@ Submap head(Submap s, std::size_t to) {
   return s;
 }
 
-TEST(KeyframeExtensions, AppendKeypointsToStoredKeyframesAndReverifyTheirLoops) {
+class KeyframeExtensions : public ::testing::TestWithParam<int> {};
+
+// Parameter: server.map.closure_budget. Under a budget the merge does not
+// measure the loops again itself: they wait with the deferred closures and are
+// measured while no submap waits (process() after the queue drained).
+TEST_P(KeyframeExtensions, AppendKeypointsToStoredKeyframesAndReverifyTheirLoops) {
   fixture::Options options;
   options.keypoints = 240;
   auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 16.0, -1},
@@ -60,6 +65,7 @@ TEST(KeyframeExtensions, AppendKeypointsToStoredKeyframesAndReverifyTheirLoops) 
                                  options);
   ASSERT_TRUE(fx.ok()) << fx.error();
   ServerParams params;
+  params.map.closure_budget = GetParam();
   auto created = Server::create(params, HERMES_SOURCE_DIR);
   ASSERT_TRUE(created.ok()) << created.error();
   Server& server = **created;
@@ -95,7 +101,11 @@ TEST(KeyframeExtensions, AppendKeypointsToStoredKeyframesAndReverifyTheirLoops) 
     }
     server.process(now, -1);
   }
+  for (int idle = 0; idle < 1000 && server.deferredClosures() > 0; ++idle) server.process(now += 1, -1);
+  EXPECT_EQ(server.deferredClosures(), 0u);
   EXPECT_EQ(server.counters().merge_errors, 0u) << server.counters().last_error;
+  if (GetParam() > 0) EXPECT_EQ(server.counters().loops_reverify_deferred, server.counters().loops_reverified);
+  else EXPECT_EQ(server.counters().loops_reverify_deferred, 0u);
   EXPECT_EQ(server.counters().extensions_unknown, 2u);
   EXPECT_EQ(server.counters().keyframes_extended,
             fx->agents[0].submaps[0].keyframes.size() + fx->agents[1].submaps[0].keyframes.size());
@@ -134,6 +144,11 @@ TEST(KeyframeExtensions, AppendKeypointsToStoredKeyframesAndReverifyTheirLoops) 
   ASSERT_TRUE(ev.ok()) << ev.error();
   EXPECT_LT(ev->merged_ate.trans_m.rmse, 0.02);
 }
+
+INSTANTIATE_TEST_SUITE_P(ClosureBudget, KeyframeExtensions, ::testing::Values(0, 4),
+                         [](const ::testing::TestParamInfo<int>& i) {
+                           return i.param == 0 ? std::string("NoBudget") : "Budget" + std::to_string(i.param);
+                         });
 
 }  // namespace
 }  // namespace server

@@ -83,8 +83,8 @@ struct MapManagerParams {
   int duplicate_min_pair_loops = 6;
   /// At most this many closures verified per merge (closure_budget.h): round
   /// robin over the trajectory pairs, pairs with fewer accepted loops first; the
-  /// others are skipped (their candidates come again with later keyframes).
-  /// 0 = verify all.
+  /// others are deferred (closeDeferred()), and so are all the loops a merge's
+  /// keyframe extensions would measure again. 0 = verify all in the merge.
   int closure_budget = 0;
   /// Closures over the budget wait here (oldest dropped beyond this many) and
   /// are verified by closeDeferred() while no submap waits.
@@ -106,6 +106,7 @@ struct MergeStats {
   int loops_attempted = 0, loops_geometric = 0;
   int loops_skipped_duplicate = 0;  ///< closures not verified: near-duplicates of a loop (duplicate_neighbours)
   int loops_skipped_budget = 0;     ///< closures deferred: over the merge's closure_budget
+  int loops_reverify_deferred = 0;  ///< re-verifications after keyframe extensions deferred (budget on)
   bool optimized = false;
   bool refined = false;        ///< the map refinement ran around this merge's new loops
   /// Wall time of this merge per stage [ms]: store, extend, detect_loops (place
@@ -169,7 +170,8 @@ class MapManager {
   /// (closure_budget; chosen as in a merge, pairs with fewer loops first), then
   /// PCM, anchoring and, once none is left, the pose graph. Returns how many were
   /// verified (0: none waiting).
-  Expected<int> closeDeferred(int max_closures, const std::function<double(RobotId)>& credibility = nullptr);
+  Expected<int> closeDeferred(int max_closures, const std::function<double(RobotId)>& credibility = nullptr,
+                              MergeStats* stats = nullptr);
   /// Closures waiting for closeDeferred(), and those dropped because more waited
   /// than deferred_closures.
   std::size_t deferredClosures() const { return deferred_.size(); }
@@ -229,6 +231,9 @@ class MapManager {
     KeyframeKey query;
     std::optional<PlaceCandidate> candidate;
     bool spatial = false;
+    /// Set: not a new closure but loop `reverify` measured again (its rig
+    /// gained keypoints from keyframe extensions); query / candidate = its ends.
+    std::optional<std::uint64_t> reverify;
   };
   /// Position of a stored keyframe in its trajectory (-1 if not stored).
   int positionOf(const KeyframeKey& key) const;
@@ -245,6 +250,9 @@ class MapManager {
   void takeClosure(const LoopJob& job, const LoopClosureResult& r, MergeStats* stats);
   /// Keeps a closure over the budget for closeDeferred() (oldest dropped when full).
   void defer(const LoopJob& job);
+  /// The loop with this id measured again: the new measurement replaces it
+  /// unless it has fewer inliers (or the closure failed).
+  void takeReverification(std::uint64_t loop_id, const LoopClosureResult& r, MergeStats* stats);
   /// Place recognition for the newly stored keyframes (in order), then loop
   /// closure of all their candidates on loop_threads threads.
   void detectLoops(const std::vector<KeyframeKey>& added, MergeStats* stats);

@@ -69,6 +69,7 @@ struct ServerCounters {
   std::size_t keyframes_extended = 0;  ///< stored keyframes keyframe extensions added keypoints to
   std::size_t extensions_unknown = 0;  ///< extensions naming a keyframe the map does not hold
   std::size_t loops_reverified = 0;    ///< loops closed again after extensions
+  std::size_t loops_reverify_deferred = 0;  ///< of those, deferred by the closure budget first
   std::string last_error;
 };
 
