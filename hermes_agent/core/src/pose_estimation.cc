@@ -13,7 +13,8 @@ Status PoseEstimationParams::read(const Config& c, const std::string& p) {
                           {"ransac_confidence", &ransac_confidence},
                           {"huber_px", &huber_px},
                           {"chi2_threshold", &chi2_threshold},
-                          {"chi2_threshold_stereo", &chi2_threshold_stereo}}) {
+                          {"chi2_threshold_stereo", &chi2_threshold_stereo},
+                          {"stereo_sigma_scale", &stereo_sigma_scale}}) {
     Status s = c.get(p + "." + key, ptr);
     if (!s) return s;
   }
@@ -37,6 +38,7 @@ void PoseEstimationParams::write(ConfigWriter* w, const std::string& p) const {
   w->set(p + ".chi2_threshold", chi2_threshold);
   w->set(p + ".chi2_threshold_stereo", chi2_threshold_stereo);
   w->set(p + ".stereo_residual", stereo_residual);
+  w->set(p + ".stereo_sigma_scale", stereo_sigma_scale);
   w->set(p + ".refine_rounds", refine_rounds);
   w->set(p + ".iterations_per_round", iterations_per_round);
   w->set(p + ".min_inliers", min_inliers);
@@ -50,6 +52,7 @@ Status PoseEstimationParams::validate() const {
   if (!(huber_px > 0)) return Error{"pose.huber_px must be > 0"};
   if (!(chi2_threshold > 0)) return Error{"pose.chi2_threshold must be > 0"};
   if (!(chi2_threshold_stereo > 0)) return Error{"pose.chi2_threshold_stereo must be > 0"};
+  if (!(stereo_sigma_scale > 0)) return Error{"pose.stereo_sigma_scale must be > 0"};
   if (refine_rounds < 1) return Error{"pose.refine_rounds must be >= 1"};
   if (iterations_per_round < 1) return Error{"pose.iterations_per_round must be >= 1"};
   if (min_inliers < 4) return Error{"pose.min_inliers must be >= 4"};
@@ -84,19 +87,22 @@ bool hasRight(const Correspondences& c, std::size_t i, bool enabled) {
   return enabled && !c.u_right.empty() && c.u_right[i] >= 0;
 }
 
-/// Sigma-normalised right-column residual of p (camera frame, z > 0).
+/// Right-column residual of p (camera frame, z > 0), normalised by the left
+/// sigma times `scale` (PoseEstimationParams::stereo_sigma_scale).
 double rightResidual(const Correspondences& c, const PinholeIntrinsics& K, std::size_t i,
-                     const Vec3& p) {
-  return (K.fx * (p.x() - c.baseline) / p.z() + K.cx - c.u_right[i]) / sigmaOf(c, i);
+                     const Vec3& p, double scale) {
+  return (K.fx * (p.x() - c.baseline) / p.z() + K.cx - c.u_right[i]) / (sigmaOf(c, i) * scale);
 }
 
 /// Robust reprojection cost 1/2 sum rho(|r_i|^2) over the observations in `use`
 /// (Huber rho with width `huber`, r = ReprojectionResidual, plus the right-image
-/// column where `stereo` and the observation has one), and when H and g are
+/// column where right_scale > 0 and the observation has one, its sigma scaled by
+/// right_scale), and when H and g are
 /// given the Gauss-Newton normal equations in the left perturbation
 /// T <- (Exp(phi) R, Exp(phi) t + rho), xi = (rho, phi), with IRLS weights rho'.
 double robustCost(const Correspondences& c, const PinholeIntrinsics& K, const std::vector<bool>& use,
-                  double huber, bool stereo, const Mat3& R, const Vec3& t, Mat6* H, Vec6* g) {
+                  double huber, double right_scale, const Mat3& R, const Vec3& t, Mat6* H, Vec6* g) {
+  const bool stereo = right_scale > 0;
   const double a2 = huber * huber;
   double cost = 0;
   if (H) {
@@ -114,7 +120,7 @@ double robustCost(const Correspondences& c, const PinholeIntrinsics& K, const st
     const double iz = 1.0 / p.z();
     const Vec3 r((K.fx * p.x() * iz + K.cx - c.uv[i].x()) * inv_s,
                  (K.fy * p.y() * iz + K.cy - c.uv[i].y()) * inv_s,
-                 hasRight(c, i, stereo) ? rightResidual(c, K, i, p) : 0.0);
+                 hasRight(c, i, stereo) ? rightResidual(c, K, i, p, right_scale) : 0.0);
     const double s = r.squaredNorm();
     double w = 1.0;
     if (s <= a2) {
@@ -129,6 +135,7 @@ double robustCost(const Correspondences& c, const PinholeIntrinsics& K, const st
     Jp << K.fx * iz, 0, -K.fx * p.x() * iz * iz, 0, K.fy * iz, -K.fy * p.y() * iz * iz,
         K.fx * iz, 0, -K.fx * (p.x() - c.baseline) * iz * iz;
     if (!hasRight(c, i, stereo)) Jp.row(2).setZero();
+    else Jp.row(2) /= right_scale;
     Jp *= inv_s;
     Eigen::Matrix<double, 3, 6> J;
     J.leftCols<3>() = Jp;
@@ -144,11 +151,11 @@ double robustCost(const Correspondences& c, const PinholeIntrinsics& K, const st
 /// or the gradient < 1e-10 (tighter than Ceres' defaults: an iteration costs
 /// little here, and the Huber tails make the cost flat near the minimum).
 void minimiseRobustCost(const Correspondences& c, const PinholeIntrinsics& K,
-                        const std::vector<bool>& use, double huber, bool stereo, int iterations,
-                        Mat3* R, Vec3* t) {
+                        const std::vector<bool>& use, double huber, double right_scale,
+                        int iterations, Mat3* R, Vec3* t) {
   Mat6 H;
   Vec6 g;
-  double cost = robustCost(c, K, use, huber, stereo, *R, *t, &H, &g);
+  double cost = robustCost(c, K, use, huber, right_scale, *R, *t, &H, &g);
   double lambda = 1e-4;
   for (int it = 0; it < iterations; ++it) {
     if (g.lpNorm<Eigen::Infinity>() < 1e-10) break;
@@ -159,7 +166,7 @@ void minimiseRobustCost(const Correspondences& c, const PinholeIntrinsics& K,
     const Mat3 dR = expSO3(step.tail<3>());
     const Mat3 R_new = Quat(dR * *R).normalized().toRotationMatrix();
     const Vec3 t_new = dR * *t + step.head<3>();
-    const double new_cost = robustCost(c, K, use, huber, stereo, R_new, t_new, nullptr, nullptr);
+    const double new_cost = robustCost(c, K, use, huber, right_scale, R_new, t_new, nullptr, nullptr);
     if (new_cost < cost) {
       const bool small_change = cost - new_cost < 1e-10 * cost ||
                                 step.norm() < 1e-10 * (t->norm() + 1e-8);
@@ -167,7 +174,7 @@ void minimiseRobustCost(const Correspondences& c, const PinholeIntrinsics& K,
       *t = t_new;
       lambda = std::max(lambda / 3, 1e-12);
       if (small_change) break;
-      cost = robustCost(c, K, use, huber, stereo, *R, *t, &H, &g);
+      cost = robustCost(c, K, use, huber, right_scale, *R, *t, &H, &g);
     } else {
       lambda *= 4;
     }
@@ -202,7 +209,7 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
       chi2[i] = r[0] * r[0] + r[1] * r[1];
       const Vec3 pc = R * c.p_W[i] + t;
       if (hasRight(c, i, p.stereo_residual) && pc.z() > 1e-6) {
-        const double rr = rightResidual(c, K, i, pc);
+        const double rr = rightResidual(c, K, i, pc, p.stereo_sigma_scale);
         chi2[i] += rr * rr;
         inlier[i] = chi2[i] <= p.chi2_threshold_stereo;
       } else {
@@ -213,7 +220,8 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
   for (int round = 0; round < p.refine_rounds; ++round) {
     const int used = int(std::count(inlier.begin(), inlier.end(), true));
     if (used < p.min_inliers) break;
-    minimiseRobustCost(c, K, inlier, p.huber_px, p.stereo_residual, p.iterations_per_round, &R, &t);
+    minimiseRobustCost(c, K, inlier, p.huber_px, p.stereo_residual ? p.stereo_sigma_scale : 0.0,
+                       p.iterations_per_round, &R, &t);
     classify();  // every observation, so wrongly rejected ones can come back
   }
   PoseEstimate out;
