@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <random>
 
 #include "hermes/agent/pose_estimation.h"
@@ -67,6 +68,29 @@ struct StereoResidual {
   }
   Vec3 left_p;
 };
+
+/// Ceres' minimum of the residual blocks `add` puts on (q, t), from init, with
+/// tight tolerances: the reference for the hand-written refinement.
+SE3 ceresMinimum(const SE3& init, const std::function<void(ceres::Problem&, double*, double*)>& add) {
+  const Quat q0 = init.quat();
+  double qa[4] = {q0.x(), q0.y(), q0.z(), q0.w()};
+  double ta[3] = {init.translation().x(), init.translation().y(), init.translation().z()};
+  ceres::Problem::Options po;
+  po.manifold_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem problem(po);
+  problem.AddParameterBlock(qa, 4, new ceres::EigenQuaternionManifold());
+  problem.AddParameterBlock(ta, 3);
+  add(problem, qa, ta);
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = 100;
+  so.function_tolerance = 1e-12;
+  so.parameter_tolerance = 1e-12;
+  so.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  return SE3(Quat(qa[3], qa[0], qa[1], qa[2]), Vec3(ta[0], ta[1], ta[2]));
+}
 
 }  // namespace
 
@@ -166,26 +190,11 @@ TEST(PoseEstimation, RefinementReachesTheCeresOptimumOfTheSameRobustCost) {
     auto est = refinePose(c, K, init, p);
     ASSERT_TRUE(est.ok()) << est.error();
 
-    const Quat q0 = init.quat();
-    double qa[4] = {q0.x(), q0.y(), q0.z(), q0.w()};
-    double ta[3] = {init.translation().x(), init.translation().y(), init.translation().z()};
-    ceres::Problem::Options po;
-    po.manifold_ownership = ceres::TAKE_OWNERSHIP;
-    ceres::Problem problem(po);
-    problem.AddParameterBlock(qa, 4, new ceres::EigenQuaternionManifold());
-    problem.AddParameterBlock(ta, 3);
-    for (std::size_t i = 0; i < c.size(); ++i)
-      problem.AddResidualBlock(ReprojectionResidual::create(c.uv[i], c.p_W[i], K, c.sigma_px[i]),
-                               new ceres::HuberLoss(p.huber_px), qa, ta);
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = 100;
-    so.function_tolerance = 1e-12;
-    so.parameter_tolerance = 1e-12;
-    so.logging_type = ceres::SILENT;
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
-    const SE3 ref(Quat(qa[3], qa[0], qa[1], qa[2]), Vec3(ta[0], ta[1], ta[2]));
+    const SE3 ref = ceresMinimum(init, [&](ceres::Problem& problem, double* qa, double* ta) {
+      for (std::size_t i = 0; i < c.size(); ++i)
+        problem.AddResidualBlock(ReprojectionResidual::create(c.uv[i], c.p_W[i], K, c.sigma_px[i]),
+                                 new ceres::HuberLoss(p.huber_px), qa, ta);
+    });
     EXPECT_LT(translationalDistance(est->T_C_W, ref), 1e-6) << "trial " << trial;
     EXPECT_LT(angularDistance(est->T_C_W, ref), 1e-7) << "trial " << trial;
   }
@@ -233,36 +242,21 @@ TEST(PoseEstimation, StereoRefinementReachesTheCeresOptimumOfTheSameRobustCost) 
     auto est = refinePose(c, K, init, p);
     ASSERT_TRUE(est.ok()) << est.error();
 
-    const Quat q0 = init.quat();
-    double qa[4] = {q0.x(), q0.y(), q0.z(), q0.w()};
-    double ta[3] = {init.translation().x(), init.translation().y(), init.translation().z()};
-    ceres::Problem::Options po;
-    po.manifold_ownership = ceres::TAKE_OWNERSHIP;
-    ceres::Problem problem(po);
-    problem.AddParameterBlock(qa, 4, new ceres::EigenQuaternionManifold());
-    problem.AddParameterBlock(ta, 3);
-    for (std::size_t i = 0; i < c.size(); ++i) {
-      ceres::LossFunction* loss = new ceres::HuberLoss(p.huber_px);
-      if (c.u_right[i] < 0) {
-        problem.AddResidualBlock(
-            ReprojectionResidual::create(c.uv[i], c.p_W[i], K, c.sigma_px[i]), loss, qa, ta);
-        continue;
+    const SE3 ref = ceresMinimum(init, [&](ceres::Problem& problem, double* qa, double* ta) {
+      for (std::size_t i = 0; i < c.size(); ++i) {
+        ceres::LossFunction* loss = new ceres::HuberLoss(p.huber_px);
+        if (c.u_right[i] < 0) {
+          problem.AddResidualBlock(
+              ReprojectionResidual::create(c.uv[i], c.p_W[i], K, c.sigma_px[i]), loss, qa, ta);
+          continue;
+        }
+        auto* f = new StereoResidual{ReprojectionResidual(c.uv[i], c.p_W[i], K, c.sigma_px[i]),
+                                     c.u_right[i], b, K.fx, K.cx,
+                                     1.0 / (c.sigma_px[i] * p.stereo_sigma_scale), c.p_W[i]};
+        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<StereoResidual, 3, 4, 3>(f), loss,
+                                 qa, ta);
       }
-      auto* f = new StereoResidual{ReprojectionResidual(c.uv[i], c.p_W[i], K, c.sigma_px[i]),
-                                   c.u_right[i], b, K.fx, K.cx,
-                                   1.0 / (c.sigma_px[i] * p.stereo_sigma_scale), c.p_W[i]};
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<StereoResidual, 3, 4, 3>(f), loss,
-                               qa, ta);
-    }
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = 100;
-    so.function_tolerance = 1e-12;
-    so.parameter_tolerance = 1e-12;
-    so.logging_type = ceres::SILENT;
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
-    const SE3 ref(Quat(qa[3], qa[0], qa[1], qa[2]), Vec3(ta[0], ta[1], ta[2]));
+    });
     EXPECT_LT(translationalDistance(est->T_C_W, ref), 1e-6) << "trial " << trial;
     EXPECT_LT(angularDistance(est->T_C_W, ref), 1e-7) << "trial " << trial;
   }
