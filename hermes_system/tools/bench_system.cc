@@ -68,13 +68,13 @@ const char* kUsage =
     "                   one hall; variants default to hermes,raw\n"
     "  --swarm-bandwidth M  shared link of the swarm sweep [Mbit/s] (default 50)\n"
     "  --swarm-data DIR     whole-sequence renders (default data_cache/mh_full; rendered\n"
-    "                   from ../shared/data/euroc_gt when a sequence is missing)\n"
+    "                   from ../shared/data/euroc_gt, else config/trajectories, when missing)\n"
     "  --swarm-sequences L  (default MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,\n"
     "                   MH_05_difficult)\n"
     "  --full SET       instead: the whole-sequence table. SET mh: five robots over whole\n"
     "                   MH_01-05 in one hall (data_cache/mh_full); v1: three over whole\n"
     "                   V1_01-03 (data_cache/v1_full); rendered from ../shared/data/euroc_gt\n"
-    "                   when missing. Bandwidths default to 0,10,2,0.5, variants to\n"
+    "                   (else config/trajectories) when missing. Bandwidths default to 0,10,2,0.5, variants to\n"
     "                   hermes,raw,fixed_k100 (ablations: csa_off, covisibility, md_a, md_b\n"
     "                   run at every bandwidth given). Each run is kept in --out\n"
     "                   (default results/bench_full_SET/<variant>_<Mbit/s>/: metrics,\n"
@@ -170,13 +170,22 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
   return data;
 }
 
+/// Where whole-sequence renders take their trajectories from: the shared data's
+/// EuRoC ground truth, or (a machine without it) the 20-Hz copies shipped in
+/// config/trajectories (the renders sample 20 Hz: the same poses).
+std::string groundTruthDir() {
+  const fs::path shared = fs::path(HERMES_SHARED_DATA_DIR) / "euroc_gt";
+  if (fs::is_directory(shared)) return shared.string();
+  return (fs::path(HERMES_SOURCE_DIR) / "config" / "trajectories").string();
+}
+
 /// Swarm of n robots: robot k flies `duration` s of sequence k mod S from
 /// start 20 * (k / S) s, a window view (dataset_window.h) of the whole-sequence
 /// render in `data` (rendered there first when a sequence is missing), written
 /// under `views`.
 Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::string>& seqs,
                              const std::string& views, double duration, double rate, int n) {
-  if (Status s = system::ensureWholeRenders(data, seqs, std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt", rate); !s)
+  if (Status s = system::ensureWholeRenders(data, seqs, groundTruthDir(), rate); !s)
     return Error{s.error()};
   Robots robots;
   for (int k = 0; k < n; ++k) {
@@ -386,7 +395,7 @@ int runFull(const std::string& set, std::vector<std::string> variants, std::vect
   if (live_tracking) tracking_dir.clear();
   else if (tracking_dir.empty()) tracking_dir = (fs::path(out) / "tracking").string();
   const auto& [dir, seqs] = *data;
-  if (Status s = system::ensureWholeRenders(dir, seqs, std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt", rate); !s)
+  if (Status s = system::ensureWholeRenders(dir, seqs, groundTruthDir(), rate); !s)
     return std::fprintf(stderr, "hermes_bench_system: %s\n", s.error().c_str()), 1;
   Robots robots;
   for (const std::string& seq : seqs) {
