@@ -57,6 +57,16 @@ bool anyIn(const std::set<std::string>& nodes, const std::string& ns) {
   return false;
 }
 
+/// The server acknowledged submap k: its ACCEPTED ack, or a DUPLICATE one, or the
+/// relay passing the server's ack back. The server node starts late in these
+/// launches and accepts the relayed submaps at once, often before this test's
+/// subscriber has connected to its new publisher, so an ACCEPTED ack can be
+/// missed here (a CI run saw none for agent1 while its map merged). Applied
+/// exactly once is checked on the server's own count (expectMergedAndApplied).
+bool acknowledged(const Observed& o, const Key& k) {
+  return o.accepted.count(k) || o.duplicate.count(k) || o.passed_back.count(k);
+}
+
 }  // namespace
 
 TEST(Relay, RelayedRobotReachesTheServerOnlyThroughItsRelayExactlyOnce) {
@@ -163,7 +173,7 @@ TEST(Relay, RelayedRobotReachesTheServerOnlyThroughItsRelayExactlyOnce) {
     }
     if (o.done < 2 || o.uplink.size() < 2) continue;
     bool ok = !o.to_server.empty();
-    for (const auto& [k, n] : o.to_server) ok = ok && o.accepted.count(k);
+    for (const auto& [k, n] : o.to_server) ok = ok && acknowledged(o, k);
     for (const auto& [robot, j] : o.uplink)  // a restarted relay may carry its windows past the end: none made
       ok = ok && j.value("done", false) && j.contains("pending") && j["pending"].empty() &&
            (!j.value("created", nlohmann::json::array()).empty() || (kill_relay && robot == "agent0"));
@@ -210,7 +220,8 @@ TEST(Relay, RelayedRobotReachesTheServerOnlyThroughItsRelayExactlyOnce) {
     EXPECT_TRUE(o.offered.count(k)) << what << " never offered to the relay";
     EXPECT_TRUE(o.held.count(k)) << what << " never held by the relay";
     EXPECT_TRUE(o.to_server.count(k)) << what << " never forwarded to the server";
-    EXPECT_EQ(o.accepted.count(k) ? o.accepted.at(k) : 0, 1) << what << " not accepted exactly once";
+    EXPECT_TRUE(acknowledged(o, k)) << what << " never acknowledged by the server";
+    EXPECT_LE(o.accepted.count(k) ? o.accepted.at(k) : 0, 1) << what << " accepted twice";
     EXPECT_TRUE(o.passed_back.count(k)) << what << ": the server's acknowledgement not passed back";
   }
   EXPECT_TRUE(u1.contains("pending") && u1["pending"].empty()) << "agent1's spool holds unacknowledged submaps";
@@ -233,8 +244,9 @@ TEST(Relay, RelayedRobotReachesTheServerOnlyThroughItsRelayExactlyOnce) {
   std::set<std::string> robots;
   for (const auto& [k, n] : o.to_server) {
     robots.insert(std::get<0>(k));
-    EXPECT_EQ(o.accepted.count(k) ? o.accepted.at(k) : 0, 1)
-        << std::get<0>(k) << " seq " << std::get<2>(k) << " not accepted exactly once";
+    EXPECT_TRUE(acknowledged(o, k)) << std::get<0>(k) << " seq " << std::get<2>(k) << " never acknowledged";
+    EXPECT_LE(o.accepted.count(k) ? o.accepted.at(k) : 0, 1)
+        << std::get<0>(k) << " seq " << std::get<2>(k) << " accepted twice";
   }
   EXPECT_EQ(robots.size(), 2u);
   hermes_tests::expectMergedAndApplied(o.status, 2, o.to_server.size());
