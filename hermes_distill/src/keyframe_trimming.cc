@@ -322,9 +322,15 @@ TrimResult trimKeyframes(const Submap& w, int max_keyframes, const DistillParams
     return finish(SolveStatus::kInfeasibleRelaxed);
   }
   // The time limit covers the whole call: model building, the root LP and CBC.
-  const auto deadline = t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                  std::chrono::duration<double>(params.trim_time_limit_s));
+  // Work limits (params.workLimits()): no deadline; the root LP's iterations and
+  // CBC's nodes are bounded instead.
+  const bool work = params.workLimits();
+  const auto deadline =
+      work ? std::chrono::steady_clock::time_point::max()
+           : t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                      std::chrono::duration<double>(params.trim_time_limit_s));
   auto remaining = [&] {
+    if (work) return std::numeric_limits<double>::infinity();
     return std::chrono::duration<double>(deadline - std::chrono::steady_clock::now()).count();
   };
   const TrimModel m = buildTrimModel(n, arcs, s, groups, N, params);
@@ -357,11 +363,12 @@ TrimResult trimKeyframes(const Submap& w, int max_keyframes, const DistillParams
     }
     solver->setWarmStart(&basis);
   }
-  solver->getModelPtr()->setMaximumWallSeconds(remaining());
+  if (work) solver->getModelPtr()->setMaximumIterations(params.trim_max_lp_iterations);
+  else solver->getModelPtr()->setMaximumWallSeconds(remaining());
   solver->initialSolve();
   // CBC's root (re-solve, rounding) is outside its clock and can take 5-10 ms:
   // with less than 30% of the budget left it would overrun.
-  if (!solver->isProvenOptimal() || remaining() < 0.3 * params.trim_time_limit_s)
+  if (!solver->isProvenOptimal() || (!work && remaining() < 0.3 * params.trim_time_limit_s))
     return finish(SolveStatus::kGreedyFallback);
   auto model = std::make_unique<CbcModel>(*solver);
   {
@@ -373,8 +380,12 @@ TrimResult trimKeyframes(const Submap& w, int max_keyframes, const DistillParams
   model->solver()->messageHandler()->setLogLevel(0);
   model->setNumberStrong(0);  // strong branching (pseudo-cost initialisation included)
   model->setNumberBeforeTrust(0);  // ignores the time limit
-  model->setUseElapsedTime(true);
-  model->setMaximumSeconds(0.5 * remaining());  // checked between nodes only
+  if (work) {
+    model->setMaximumNodes(params.trim_max_nodes);
+  } else {
+    model->setUseElapsedTime(true);
+    model->setMaximumSeconds(0.5 * remaining());  // checked between nodes only
+  }
   {  // Incumbent: the improved path (feasible by construction, so no check LP).
     std::vector<double> start = m.columnsOf(r.kept, arcs);
     double o = 0;
@@ -396,8 +407,9 @@ TrimResult trimKeyframes(const Submap& w, int max_keyframes, const DistillParams
     r.kept = fallback;
     return finish(SolveStatus::kGreedyFallback);
   }
-  const bool optimal = model->isProvenOptimal() && !model->isSecondsLimitReached();
-  return finish(optimal ? SolveStatus::kOptimal : SolveStatus::kTimeLimited);
+  if (model->isProvenOptimal() && !model->isSecondsLimitReached() && !model->isNodeLimitReached())
+    return finish(SolveStatus::kOptimal);
+  return finish(work ? SolveStatus::kWorkLimited : SolveStatus::kTimeLimited);
 }
 
 }  // namespace distill

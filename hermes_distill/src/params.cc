@@ -71,6 +71,10 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("trim_lambda", trim_lambda)
   HERMES_READ("trim_min_shared", trim_min_shared)
   HERMES_READ("trim_time_limit_s", trim_time_limit_s)
+  HERMES_READ("solver_limits", solver_limits)
+  HERMES_READ("milp_max_nodes", milp_max_nodes)
+  HERMES_READ("trim_max_nodes", trim_max_nodes)
+  HERMES_READ("trim_max_lp_iterations", trim_max_lp_iterations)
   HERMES_READ_BOOL("trouble_aware", trouble_aware)
   HERMES_READ_BOOL("unplaced_aware", unplaced_aware)
   HERMES_READ("trouble_weak_frames", trouble_weak_frames)
@@ -114,6 +118,10 @@ Status DistillParams::validate() const {
   if (grid_cols < 1 || grid_rows < 1) return bad("grid_cols/grid_rows must be >= 1");
   if (milp_rel_gap < 0 || milp_rel_gap >= 1) return bad("milp_rel_gap must be in [0, 1)");
   if (!(milp_time_limit_s > 0) || !(trim_time_limit_s > 0)) return bad("time limits must be > 0");
+  if (solver_limits != "time" && solver_limits != "work")
+    return bad("solver_limits must be time or work, got '" + solver_limits + "'");
+  if (milp_max_nodes < 1 || trim_max_nodes < 1 || trim_max_lp_iterations < 1)
+    return bad("milp_max_nodes, trim_max_nodes, trim_max_lp_iterations must be >= 1");
   if (trim_w_rot < 0 || trim_w_trans < 0) return bad("trim weights must be >= 0");
   if (trim_lambda < 0 || trim_min_shared < 1) return bad("trim_lambda >= 0, trim_min_shared >= 1");
   if (bytes_c0 < 0 || bytes_kf < 0 || !(bytes_obs > 0) || !(bytes_lm > 0))
@@ -164,6 +172,10 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "trim_lambda", trim_lambda);
   out->set(p + "trim_min_shared", trim_min_shared);
   out->set(p + "trim_time_limit_s", trim_time_limit_s);
+  out->set(p + "solver_limits", solver_limits);
+  out->set(p + "milp_max_nodes", milp_max_nodes);
+  out->set(p + "trim_max_nodes", trim_max_nodes);
+  out->set(p + "trim_max_lp_iterations", trim_max_lp_iterations);
   out->set(p + "bytes_c0", bytes_c0);
   out->set(p + "bytes_kf", bytes_kf);
   out->set(p + "bytes_obs", bytes_obs);

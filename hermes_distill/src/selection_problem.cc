@@ -15,6 +15,7 @@ const char* toString(SolveStatus s) {
   switch (s) {
     case SolveStatus::kOptimal: return "optimal";
     case SolveStatus::kTimeLimited: return "time_limited";
+    case SolveStatus::kWorkLimited: return "work_limited";
     case SolveStatus::kGreedyFallback: return "greedy_fallback";
     case SolveStatus::kInfeasibleRelaxed: return "infeasible_relaxed";
     case SolveStatus::kHeuristic: return "heuristic";

@@ -129,8 +129,8 @@ bool fits(const SelectionProblem& p, const std::vector<int>& sel) {
 
 }  // namespace
 
-MilpSelector::MilpSelector(double time_limit_s, bool warm_start, double rel_gap)
-    : time_limit_s_(time_limit_s), warm_start_(warm_start), rel_gap_(rel_gap) {}
+MilpSelector::MilpSelector(double time_limit_s, bool warm_start, double rel_gap, int max_nodes)
+    : time_limit_s_(time_limit_s), warm_start_(warm_start), rel_gap_(rel_gap), max_nodes_(max_nodes) {}
 
 SelectionResult MilpSelector::select(const SelectionProblem& p) const {
   const auto t0 = std::chrono::steady_clock::now();
@@ -207,8 +207,12 @@ SelectionResult MilpSelector::select(const SelectionProblem& p) const {
   model->setLogLevel(0);
   model->messageHandler()->setLogLevel(0);
   model->solver()->messageHandler()->setLogLevel(0);
-  model->setUseElapsedTime(true);
-  model->setMaximumSeconds(std::max(1e-4, p.time_limit_s > 0 ? p.time_limit_s : time_limit_s_));
+  if (max_nodes_ > 0) {
+    model->setMaximumNodes(max_nodes_);
+  } else {
+    model->setUseElapsedTime(true);
+    model->setMaximumSeconds(std::max(1e-4, p.time_limit_s > 0 ? p.time_limit_s : time_limit_s_));
+  }
   model->setAllowableGap(1e-7);
   model->setAllowableFractionGap(rel_gap_);
   // Measured on real 5-s windows (hermes_bench_mapuse): probing cuts took ~40 %
@@ -249,8 +253,9 @@ SelectionResult MilpSelector::select(const SelectionProblem& p) const {
   }
   r.selected = chosen;
   if (evaluateObjective(p, chosen) > incumbent_obj + 1e-9) r.selected = incumbent;
-  const bool optimal = model->isProvenOptimal() && !model->isSecondsLimitReached();
-  return done(optimal ? SolveStatus::kOptimal : SolveStatus::kTimeLimited);
+  if (model->isProvenOptimal() && !model->isSecondsLimitReached() && !model->isNodeLimitReached())
+    return done(SolveStatus::kOptimal);
+  return done(max_nodes_ > 0 ? SolveStatus::kWorkLimited : SolveStatus::kTimeLimited);
 }
 
 }  // namespace distill

@@ -165,7 +165,8 @@ Expected<std::unique_ptr<LandmarkSelector>> makeLandmarkSelector(const std::stri
   std::unique_ptr<LandmarkSelector> s;
   if (strategy == "milp") {
     s = std::make_unique<MilpSelector>(params.milp_time_limit_s, params.milp_warm_start,
-                                       params.milp_rel_gap);
+                                       params.milp_rel_gap,
+                                       params.workLimits() ? params.milp_max_nodes : 0);
   } else if (strategy == "greedy_logdet") {
     s = std::make_unique<GreedyLogDetSelector>();
   } else if (strategy == "stability") {

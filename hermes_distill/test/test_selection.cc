@@ -158,6 +158,31 @@ TEST(Selection, TimeLimitReturnsGreedyOrBetterWithItsStatus) {
   }
 }
 
+TEST(Selection, WorkLimitsIgnoreTheClockAndRepeatExactly) {
+  DistillParams params;
+  const SyntheticWindow w = testing::window("MH_01_easy", 60.0);
+  const LandmarkScores sc = computeScores(w.submap, w.hint, 0, params);
+  SelectionProblem p = buildSelectionProblem(w.submap, sc, 60, 0, 64, 40, params);
+  double all = 0;
+  for (double x : p.bytes) all += x;
+  p.budget = 0.4 * all;
+  const SelectionResult timed = MilpSelector(2.0, true).select(p);
+  ASSERT_EQ(timed.status, SolveStatus::kOptimal);
+  // A node limit, no time limit: a time limit of 1 ns is not read at all.
+  const SelectionResult work = MilpSelector(1e-9, true, 0.0, 1000000).select(p);
+  EXPECT_EQ(work.status, SolveStatus::kOptimal);
+  EXPECT_NEAR(work.objective, timed.objective, 1e-9);
+  // One node: stopped by the work limit (or solved at the root), the same
+  // selection on every call, greedy or better, within the budget.
+  p.time_limit_s = 1e-9;
+  const SelectionResult one = MilpSelector(1e-9, true, 0.0, 1).select(p);
+  EXPECT_TRUE(one.status == SolveStatus::kWorkLimited || one.status == SolveStatus::kOptimal)
+      << toString(one.status);
+  EXPECT_LE(one.bytes, p.budget);
+  EXPECT_LE(one.objective, one.greedy_objective + 1e-9);
+  for (int rep = 0; rep < 3; ++rep) EXPECT_EQ(MilpSelector(1e-9, true, 0.0, 1).select(p).selected, one.selected);
+}
+
 TEST(Selection, MilpStartsFromABetterHintAndIgnoresOneOverBudget) {
   std::mt19937_64 rng(5);
   for (int trial = 0; trial < 10; ++trial) {

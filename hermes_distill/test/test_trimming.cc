@@ -89,6 +89,38 @@ TEST(Trimming, ExhaustedBudgetReturnsTheImprovedPath) {
   EXPECT_GE(exact.objective, fast.objective - 1e-9);
 }
 
+TEST(Trimming, WorkLimitsIgnoreTheClockAndRepeatExactly) {
+  DistillParams params;
+  params.solver_limits = "work";
+  params.trim_time_limit_s = 1e-9;  // not read under work limits
+  const Submap w = testing::window("V1_01_easy", 70.0).submap;
+  const int n = static_cast<int>(w.keyframes.size());
+  const int N = std::max(3, n / 2);
+  DistillParams exact_time;
+  exact_time.trim_time_limit_s = 5.0;
+  const TrimResult exact = trimKeyframes(w, N, exact_time);
+  ASSERT_EQ(exact.status, SolveStatus::kOptimal);
+  params.trim_max_nodes = 1000000;
+  params.trim_max_lp_iterations = 1000000;
+  const TrimResult ample = trimKeyframes(w, N, params);
+  EXPECT_EQ(ample.status, SolveStatus::kOptimal);
+  EXPECT_NEAR(ample.objective, exact.objective, 1e-9);
+  // Small limits: the same kept set on every call, a connected chain within N.
+  for (const auto& [nodes, iterations] : {std::pair{1, 1000000}, std::pair{1000000, 1}}) {
+    params.trim_max_nodes = nodes;
+    params.trim_max_lp_iterations = iterations;
+    const TrimResult r = trimKeyframes(w, N, params);
+    EXPECT_NE(r.status, SolveStatus::kTimeLimited);
+    if (iterations == 1) {
+      EXPECT_EQ(r.status, SolveStatus::kGreedyFallback);  // root LP stopped
+    }
+    EXPECT_LE(static_cast<int>(r.kept.size()), N);
+    EXPECT_TRUE(connected(w, r.kept, params.trim_min_shared));
+    EXPECT_LE(r.objective, exact.objective + 1e-9);
+    for (int rep = 0; rep < 3; ++rep) EXPECT_EQ(trimKeyframes(w, N, params).kept, r.kept);
+  }
+}
+
 TEST(Trimming, UnreachableBudgetKeepsTheShortestConnectedChain) {
   DistillParams params;
   params.trim_min_shared = 1000000;  // only tracker-adjacent keyframes connect
@@ -162,7 +194,9 @@ TEST(Trimming, AppliedTrimDropsOrphansAndAddsOdometry) {
   int flagged = 0;
   for (const Keyframe& kf : lt.keyframes) {
     flagged += kf.lost_before;
-    if (kf.lost_before) EXPECT_GT(kf.id, lossy.keyframes[dropped].id);
+    if (kf.lost_before) {
+      EXPECT_GT(kf.id, lossy.keyframes[dropped].id);
+    }
   }
   EXPECT_EQ(flagged, 1);
   // Without the window's edges between two kept keyframes no edge is invented.

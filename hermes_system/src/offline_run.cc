@@ -91,6 +91,7 @@ Expected<std::unique_ptr<agent::AgentPipeline>> OfflineRun::makePipeline(std::si
   const OfflineAgent& a = agents_[i];
   const DatasetInfo& info = a.dataset->info();
   agent::AgentPipelineParams ap = params_.run.agent;
+  ap.distill.solver_limits = params_.clock.solver_limits;  // deterministic by default
   ap.uplink.buffer.dir = (fs::path(spool_root_) / a.name).string();
   if (fresh) {
     std::error_code ec;

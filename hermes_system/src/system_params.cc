@@ -99,7 +99,8 @@ Status ClockParams::read(const Config& c) {
                    c.get("system.server_restart_at", &server_restart_at),
                    c.get("system.server_downtime_s", &server_downtime_s),
                    c.get("system.tracking_record_dir", &tracking_record_dir),
-                   c.get("system.tracking_replay_dir", &tracking_replay_dir)})
+                   c.get("system.tracking_replay_dir", &tracking_replay_dir),
+                   c.get("system.solver_limits", &solver_limits)})
     if (!s) return s;
   return validate();
 }
@@ -120,6 +121,8 @@ Status ClockParams::validate() const {
     if (r.agent.empty() || !(r.at_s >= 0) || !std::isfinite(r.at_s))
       return Error{"system.agent_reset: '" + formatAgentResets({r}) +
                    "' needs an agent name and a time >= 0 s"};
+  if (solver_limits != "work" && solver_limits != "time")
+    return Error{"system.solver_limits must be work or time, got '" + solver_limits + "'"};
   if (!tracking_record_dir.empty() && !tracking_replay_dir.empty())
     return Error{"system.tracking_record_dir and system.tracking_replay_dir exclude each other"};
   if ((!tracking_record_dir.empty() || !tracking_replay_dir.empty()) && !agent_reset.empty())
@@ -138,6 +141,7 @@ void ClockParams::write(ConfigWriter& w) const {
   w.set("system.server_downtime_s", server_downtime_s);
   w.set("system.agent_reset", formatAgentResets(agent_reset));
   w.set("system.tracking_record_dir", tracking_record_dir);
+  w.set("system.solver_limits", solver_limits);
   w.set("system.tracking_replay_dir", tracking_replay_dir);
 }
 

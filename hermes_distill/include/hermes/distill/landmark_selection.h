@@ -61,6 +61,7 @@ SelectionProblem buildSelectionProblem(const Submap& window, const LandmarkScore
 enum class SolveStatus {
   kOptimal,            ///< CBC proved optimality
   kTimeLimited,        ///< CBC stopped at its time limit with an incumbent (>= greedy)
+  kWorkLimited,        ///< CBC stopped at its work limit (solver_limits work) with an incumbent
   kGreedyFallback,     ///< CBC had no usable incumbent: greedy selection returned
   kInfeasibleRelaxed,  ///< the budget is negative: nothing kept, all slack reported
   kHeuristic,          ///< a heuristic strategy (no optimality claim)

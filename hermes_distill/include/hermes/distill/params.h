@@ -29,6 +29,15 @@
 //   distill.trim_lambda       λ of Eq. 15 (per missing landmark observation)
 //   distill.trim_min_shared   landmarks two consecutive kept keyframes must share
 //   distill.trim_time_limit_s CBC time limit of the trimming MILP [s]
+//   distill.solver_limits     time | work: what stops the two MILPs. time (a robot):
+//                             the wall-clock limits above, so a loaded CPU gets a
+//                             worse selection, never a late one. work (the offline
+//                             runner sets it, system.solver_limits): deterministic
+//                             work limits instead, no clock read, so a run gives
+//                             the same submaps on any machine and load:
+//   distill.milp_max_nodes    CBC branch-and-bound nodes per selection
+//   distill.trim_max_nodes    CBC nodes of the trimming MILP
+//   distill.trim_max_lp_iterations  Clp iterations of the trimming MILP's root LP
 //   distill.max_keyframes     N_KF when the coordinator is off
 //   distill.trouble_*         windows where tracking was lost or weak (see below)
 //   distill.k_max, distill.k_min   range of K the coordinator may choose
@@ -100,6 +109,12 @@ struct DistillParams {
   double trim_lambda = 0.05;
   int trim_min_shared = 10;
   double trim_time_limit_s = 0.05;
+  // What stops the MILPs (see the key list above).
+  std::string solver_limits = "time";
+  int milp_max_nodes = 10;
+  int trim_max_nodes = 10;
+  int trim_max_lp_iterations = 1500;
+  bool workLimits() const { return solver_limits == "work"; }
 
   // Windows in trouble (issue 16 item 4): the agent's tracking was lost, or
   // weak on at least trouble_weak_frames frames, within the window (or a kept

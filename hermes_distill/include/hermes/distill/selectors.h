@@ -6,12 +6,15 @@
 namespace hermes {
 namespace distill {
 
-/// Eq. 14 with CBC; status optimal / time_limited / greedy_fallback / infeasible_relaxed.
+/// Eq. 14 with CBC; status optimal / time_limited / work_limited / greedy_fallback / infeasible_relaxed.
 class MilpSelector : public LandmarkSelector {
  public:
   /// rel_gap: CBC stops once (incumbent − bound) <= rel_gap·|incumbent|; the
   /// result then counts as optimal (within that gap). 0 = prove exact optimality.
-  MilpSelector(double time_limit_s, bool warm_start, double rel_gap = 0.0);
+  /// max_nodes > 0: work limits instead of time (distill.solver_limits work):
+  /// CBC stops after max_nodes branch-and-bound nodes and no clock is read, so
+  /// the selection does not depend on the machine's load; time_limit_s is unused.
+  MilpSelector(double time_limit_s, bool warm_start, double rel_gap = 0.0, int max_nodes = 0);
   std::string name() const override { return "milp"; }
   SelectionResult select(const SelectionProblem& problem) const override;
 
@@ -19,6 +22,7 @@ class MilpSelector : public LandmarkSelector {
   double time_limit_s_;
   bool warm_start_;
   double rel_gap_;
+  int max_nodes_;
 };
 
 /// Lazy greedy on f(S) = log det(δI + Σ Λ_l), by gain per byte, within the budget;

@@ -74,6 +74,11 @@ struct ClockParams {
   /// read from DIR/<agent>.htrk; replay tracks no image. Empty: off. Not with
   /// agent_reset or agent.parallel.
   std::string tracking_record_dir, tracking_replay_dir;
+  /// What stops the agents' distillation MILPs in the offline runner: "work"
+  /// (deterministic node / iteration limits: a run gives the same result on any
+  /// machine load) or "time" (the wall-clock limits a robot uses). Replaces each
+  /// agent's distill.solver_limits (distill/params.h).
+  std::string solver_limits = "work";
 
   Status read(const Config& config);
   Status validate() const;
