@@ -192,7 +192,7 @@ std::optional<LocalBaJob> LocalMapper::cutBa(const std::vector<Keyframe>& kfs,
       b.point = int(j);
       b.uv = Vec2(kp.u, kp.v);
       b.sigma_px = kp.octave < scales.size() ? scales[kp.octave] : 1.0;
-      if (kp.depth > 0) b.u_right = std::max(0.0, kp.u - K_.fx * baseline_ / kp.depth);
+      if (kp.depth > 0) b.u_right = K_.rightColumn(kp.u, kp.depth, baseline_);
       pb.observations.push_back(b);
       job.refs.push_back({job.point_lm[j], o.keyframe, o.keypoint});
     }

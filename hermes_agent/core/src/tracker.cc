@@ -317,7 +317,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
       c.sigma_px.push_back(fs.scales[k.octave]);
       // The right image's column, as local BA uses it (none without a baseline).
       if (baseline_ > 0)
-        c.u_right.push_back(k.depth > 0 ? std::max(0.0, k.u - K_.fx * baseline_ / k.depth) : -1.0);
+        c.u_right.push_back(K_.rightColumn(k.u, k.depth, baseline_));
       corr_landmark.push_back(int(local[i]));
       corr_keypoint.push_back(match[i]);
     }

@@ -4,6 +4,7 @@
 // (agent uuid, session): an agent that restarts or resets starts a new session.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <string>
@@ -60,6 +61,12 @@ struct PinholeIntrinsics {
   bool inImage(const Vec2& uv, double border = 0.0) const {
     return uv.x() >= border && uv.y() >= border && uv.x() < width - border &&
            uv.y() < height - border;
+  }
+  /// Column in the right image of a rectified stereo pair (or the virtual right
+  /// camera of RGB-D) of left column u at `depth`, `baseline` [m] apart; at
+  /// least 0. -1 without a depth.
+  double rightColumn(double u, double depth, double baseline) const {
+    return depth > 0 ? std::max(0.0, u - fx * baseline / depth) : -1.0;
   }
 };
 
