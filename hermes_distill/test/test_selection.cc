@@ -115,14 +115,20 @@ TEST(Selection, NegativeBudgetIsReportedAsInfeasibleRelaxed) {
   EXPECT_GT(r.support_slack, 0);
 }
 
-TEST(Selection, MilpImprovesOnGreedyOnARealWindow) {
-  DistillParams params;
-  const SyntheticWindow w = testing::window("MH_01_easy", 60.0);
+/// Eq. 14 on a real MH_01 window (K = 60) with 40 % of its landmarks' bytes.
+SelectionProblem realWindowProblem(const SyntheticWindow& w, const DistillParams& params) {
   const LandmarkScores sc = computeScores(w.submap, w.hint, 0, params);
   SelectionProblem p = buildSelectionProblem(w.submap, sc, 60, 0, 64, 40, params);
   double all = 0;
   for (double x : p.bytes) all += x;
   p.budget = 0.4 * all;
+  return p;
+}
+
+TEST(Selection, MilpImprovesOnGreedyOnARealWindow) {
+  DistillParams params;
+  const SyntheticWindow w = testing::window("MH_01_easy", 60.0);
+  const SelectionProblem p = realWindowProblem(w, params);
   const SelectionResult r = MilpSelector(2.0, true).select(p);
   EXPECT_EQ(r.status, SolveStatus::kOptimal);
   ASSERT_EQ(r.selected_ids.size(), r.selected.size());
@@ -159,13 +165,7 @@ TEST(Selection, TimeLimitReturnsGreedyOrBetterWithItsStatus) {
 }
 
 TEST(Selection, WorkLimitsIgnoreTheClockAndRepeatExactly) {
-  DistillParams params;
-  const SyntheticWindow w = testing::window("MH_01_easy", 60.0);
-  const LandmarkScores sc = computeScores(w.submap, w.hint, 0, params);
-  SelectionProblem p = buildSelectionProblem(w.submap, sc, 60, 0, 64, 40, params);
-  double all = 0;
-  for (double x : p.bytes) all += x;
-  p.budget = 0.4 * all;
+  SelectionProblem p = realWindowProblem(testing::window("MH_01_easy", 60.0), DistillParams());
   const SelectionResult timed = MilpSelector(2.0, true).select(p);
   ASSERT_EQ(timed.status, SolveStatus::kOptimal);
   // A node limit, no time limit: a time limit of 1 ns is not read at all.
