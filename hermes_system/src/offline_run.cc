@@ -59,7 +59,7 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     OfflineAgent a;
     a.name = src.name;
     a.frames = src.max_frames > 0 ? std::min(src.max_frames, info.frame_count) : info.frame_count;
-    if (params.clock.tracking_replay_dir.empty()) {
+    if (trackingMode(params, src.name, *src.dataset, a.frames) != TrackingMode::kReplay) {
       auto first = loadCameraFrame(*src.dataset, 0);
       if (!first.ok()) return Error{"agent " + src.name + ": frame 0: " + first.error()};
       a.clock_offset = first->stamp;

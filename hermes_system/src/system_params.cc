@@ -123,8 +123,6 @@ Status ClockParams::validate() const {
                    "' needs an agent name and a time >= 0 s"};
   if (solver_limits != "work" && solver_limits != "time")
     return Error{"system.solver_limits must be work or time, got '" + solver_limits + "'"};
-  if (!tracking_record_dir.empty() && !tracking_replay_dir.empty())
-    return Error{"system.tracking_record_dir and system.tracking_replay_dir exclude each other"};
   if ((!tracking_record_dir.empty() || !tracking_replay_dir.empty()) && !agent_reset.empty())
     return Error{"system.tracking_record_dir / tracking_replay_dir: not with system.agent_reset "
                  "(a reset tracks a fresh map)"};

@@ -56,13 +56,25 @@ agent::TrackingKey trackingKey(const SystemParams& params, const std::string& ag
   return key;
 }
 
+TrackingMode trackingMode(const SystemParams& params, const std::string& agent,
+                          const Dataset& dataset, std::size_t frames) {
+  const ClockParams& c = params.clock;
+  if (c.tracking_replay_dir.empty())
+    return c.tracking_record_dir.empty() ? TrackingMode::kLive : TrackingMode::kRecord;
+  if (c.tracking_record_dir.empty()) return TrackingMode::kReplay;
+  auto key = agent::readTrackingKey(trackingRecordPath(c.tracking_replay_dir, agent));
+  const bool fits = key && key->matches(trackingKey(params, agent, dataset, frames));
+  return fits ? TrackingMode::kReplay : TrackingMode::kRecord;
+}
+
 Status setUpTrackingRecord(const SystemParams& params, const std::string& agent,
                            const Dataset& dataset, std::size_t frames,
                            agent::AgentPipeline* pipeline) {
   const ClockParams& c = params.clock;
-  if (c.tracking_record_dir.empty() && c.tracking_replay_dir.empty()) return Status::Ok();
+  const TrackingMode mode = trackingMode(params, agent, dataset, frames);
+  if (mode == TrackingMode::kLive) return Status::Ok();
   const agent::TrackingKey key = trackingKey(params, agent, dataset, frames);
-  if (!c.tracking_record_dir.empty()) {
+  if (mode == TrackingMode::kRecord) {
     std::error_code ec;
     fs::create_directories(c.tracking_record_dir, ec);
     if (ec)

@@ -241,7 +241,16 @@ TEST(RunCli, RecordThenReplayTracking) {
           "track_stale");
   EXPECT_EQ(o.code, 2);
   EXPECT_NE(o.err.find("'frames' differs: recorded '40', this run '30'"), std::string::npos) << o.err;
-  o = run("--dataset " + kMicro + " --out " + replay + " --record-tracking a --replay-tracking b", "track_both");
-  EXPECT_EQ(o.code, 2);
-  EXPECT_NE(o.err.find("exclude each other"), std::string::npos) << o.err;
+  // Both: the agent whose recording fits is replayed, one that does not
+  // (other frames here) is tracked and recorded into the record folder.
+  const std::string again = outDir("tracking_again");
+  o = run("--dataset " + kMicro + " --out " + replay + " --no-plots --max-frames 40 --replay-tracking " +
+              tracking + " --record-tracking " + again, "track_both_fit");
+  ASSERT_EQ(o.code, 0) << o.err;
+  EXPECT_FALSE(fs::exists(again + "/euroc_V1_01_micro.htrk"));
+  EXPECT_EQ(metrics(replay)["bytes_total"], a["bytes_total"]);
+  o = run("--dataset " + kMicro + " --out " + replay + " --no-plots --max-frames 30 --replay-tracking " +
+              tracking + " --record-tracking " + again, "track_both_stale");
+  ASSERT_EQ(o.code, 0) << o.err;
+  EXPECT_TRUE(fs::exists(again + "/euroc_V1_01_micro.htrk"));
 }

@@ -41,9 +41,10 @@ struct Outcome {
   std::optional<double> ate;
 };
 
-Outcome runOnce(const system::SystemParams& p, const std::string& tag) {
+Outcome runOnce(const system::SystemParams& p, const std::string& tag,
+                const std::vector<std::size_t>& frames = kFrames) {
   Outcome o;
-  auto run = test_support::makeHallRun(p, tag, kFrames);
+  auto run = test_support::makeHallRun(p, tag, frames);
   if (!run) return o;
   Status s = run->run();
   EXPECT_TRUE(s) << s.error();
@@ -124,6 +125,42 @@ TEST(TrackingReplay, ReplayGivesTheRecordedRunAndServesOtherVariants) {
   const Outcome raw = runOnce(raw_replay, "track_raw_replay");
   expectSameRun(raw_live, raw);
   EXPECT_GT(raw.bytes.front(), live.bytes.front());  // really another variant
+}
+
+// Both folders set: the robots whose recording fits are replayed, the one whose
+// tracking changed (corrupted here) is tracked and recorded into the other
+// folder; the run is the live run.
+TEST(TrackingReplay, OneRobotTrackedAgainTheOthersReplayed) {
+  const std::string clean = ::testing::TempDir() + "/hermes_tracking_mixed_clean";
+  const std::string again = ::testing::TempDir() + "/hermes_tracking_mixed_again";
+  fs::remove_all(clean);
+  fs::remove_all(again);
+  const std::vector<std::size_t> frames = {60, 60, 60};
+  system::SystemParams record = params("");
+  record.clock.tracking_record_dir = clean;
+  ASSERT_FALSE(runOnce(record, "track_mixed_rec", frames).odometry.empty());
+
+  system::SystemParams corrupt = params("");
+  corrupt.corrupt.agent = test_support::hallSequences()[1];
+  corrupt.corrupt.kind = "drift";
+  corrupt.corrupt.at_s = 1;
+  const Outcome live = runOnce(corrupt, "track_mixed_live", frames);
+  system::SystemParams mixed = corrupt;
+  mixed.clock.tracking_replay_dir = clean;
+  mixed.clock.tracking_record_dir = again;
+  const std::vector<std::string>& names = test_support::hallSequences();
+  auto mode = [&](const system::SystemParams& p, const std::string& name) {
+    auto ds = Dataset::open(test_support::renderedHall() + "/" + name, p.run.dataset);
+    EXPECT_TRUE(ds.ok()) << ds.error();
+    return ds.ok() ? system::trackingMode(p, name, **ds, 60) : system::TrackingMode::kLive;
+  };
+  EXPECT_EQ(mode(mixed, names[0]), system::TrackingMode::kReplay);
+  EXPECT_EQ(mode(mixed, names[1]), system::TrackingMode::kRecord);
+  EXPECT_EQ(mode(corrupt, names[0]), system::TrackingMode::kLive);
+  expectSameRun(live, runOnce(mixed, "track_mixed", frames));
+  EXPECT_FALSE(fs::exists(system::trackingRecordPath(again, names[0])));
+  EXPECT_TRUE(fs::exists(system::trackingRecordPath(again, names[1])));
+  EXPECT_FALSE(fs::exists(system::trackingRecordPath(again, names[2])));
 }
 
 TEST(TrackingReplay, StaleOrDamagedRecordingsAreRefused) {

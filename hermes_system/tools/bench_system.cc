@@ -87,8 +87,10 @@ const char* kUsage =
     "  --tracking-dir D --full: the first run records every robot's tracking in D (default\n"
     "                   OUT/tracking, not in git; ~50 MB per robot over whole V1),\n"
     "                   the later runs replay it instead of tracking the images (same\n"
-    "                   results, a fraction of the time); a recording made for other\n"
-    "                   sequences or tracker settings is recorded again. Each run's\n"
+    "                   results, a fraction of the time); a robot whose recording was\n"
+    "                   made for other sequences, tracker or corrupt.* settings is\n"
+    "                   tracked and recorded again, the others replayed (give a\n"
+    "                   corrupted run its own D with copies of the others). Each run's\n"
     "                   progress and bench_row.json say tracking record / replay.\n"
     "  --live-tracking  --full: track every run live (no recording)\n"
     "  --run-out DIR    also write each run's outputs as `hermes run` does (metrics.json,\n"
@@ -229,17 +231,19 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   };
   auto sources = openSources();
   if (!sources) return Error{sources.error()};
-  // Tracking: replayed when every robot's recording in tracking_dir fits this
-  // run (tracking_record.h), recorded there otherwise (the first run of a set,
-  // or after the sequences or tracker settings changed).
+  // Tracking: each robot whose recording in tracking_dir fits this run is
+  // replayed (tracking_record.h), the others are tracked and recorded there
+  // (the first run of a set, a robot corrupted, changed sequences or tracker
+  // settings).
   std::string mode = "live";
   if (!tracking_dir.empty()) {
     const Status fit = system::trackingRecordingsFit(*params, *sources, tracking_dir);
     mode = fit ? "replay" : "record";
-    (fit ? params->clock.tracking_replay_dir : params->clock.tracking_record_dir) = tracking_dir;
+    params->clock.tracking_replay_dir = tracking_dir;
+    if (!fit) params->clock.tracking_record_dir = tracking_dir;
     if (!fit && fs::exists(tracking_dir))
-      std::fprintf(stderr, "  %s_%s: recording the tracking again: %s\n", v.c_str(), bw.c_str(),
-                   fit.error().c_str());
+      std::fprintf(stderr, "  %s_%s: recording the tracking again where it does not fit: %s\n",
+                   v.c_str(), bw.c_str(), fit.error().c_str());
   }
   // One spool per process: two benchmarks may run side by side.
   const std::string spool =
@@ -274,6 +278,7 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
     std::error_code mk;
     fs::create_directories(out_dir, mk);
     if (Status w = system::writeRunResults(**run, r, out_dir); !w) return Error{w.error()};
+    std::ofstream((fs::path(out_dir) / "config_used.yaml").string()) << params->yaml();  // bench pose_graph
     if (v != "false_candidates")
       if (Status w = system::writeLoopAttempts(**run, attempts, (fs::path(out_dir) / "loop_attempts.csv").string()); !w)
         return Error{w.error()};

@@ -30,7 +30,7 @@ const char* kUsage =
     "                  [--set key=value ...] [--no-server]\n"
     "                  [--bandwidth MBITPS | --link-trace FILE | --scenario FILE] [--max-frames N]\n"
     "                  [--server-restart-at S ...] [--agent-reset NAME@S ...]\n"
-    "                  [--record-tracking DIR | --replay-tracking DIR]\n"
+    "                  [--record-tracking DIR] [--replay-tracking DIR]\n"
     "                  [--no-plots] [--json] [--quiet]\n"
     "Runs one agent per dataset folder (EuRoC ASL stereo or TUM RGB-D layout). With the\n"
     "server (default), all agents and the edge server run in one process on a simulated\n"
@@ -69,6 +69,8 @@ const char* kUsage =
     "--replay-tracking DIR (system.tracking_replay_dir): load no image, replay that tracking\n"
     "instead: the same run for any variant / bandwidth, minus the tracking time. Refused\n"
     "when the recording was made for other frames, dataset or tracker/corruption params.\n"
+    "Both: an agent whose recording in the replay DIR fits is replayed, the others are\n"
+    "tracked and recorded into the record DIR (e.g. one robot corrupted, four replayed).\n"
     "--json: print metrics.json to stdout instead of the report.\n"
     "Exit: 0 ok, 1 failure while running, 2 bad input.\n";
 
@@ -190,8 +192,6 @@ std::string parseArgs(int argc, char** argv, Args* a) {
     return "--server-restart-at needs the server (drop --no-server)";
   if (a->no_server && !a->agent_reset.empty())
     return "--agent-reset needs the server (drop --no-server)";
-  if (!a->record_tracking.empty() && !a->replay_tracking.empty())
-    return "--record-tracking and --replay-tracking exclude each other";
   if (a->no_server && (!a->record_tracking.empty() || !a->replay_tracking.empty()))
     return "--record-tracking / --replay-tracking need the server (drop --no-server)";
   return "";

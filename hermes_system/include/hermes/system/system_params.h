@@ -71,8 +71,10 @@ struct ClockParams {
   std::vector<AgentReset> agent_reset;
   /// Tracking record / replay (tracking_record.h; `hermes run --record-tracking
   /// DIR` / `--replay-tracking DIR`): every agent's tracking is written to /
-  /// read from DIR/<agent>.htrk; replay tracks no image. Empty: off. Not with
-  /// agent_reset or agent.parallel.
+  /// read from DIR/<agent>.htrk; replay tracks no image. Both set: each agent
+  /// replays when its recording in the replay dir fits this run, else it is
+  /// tracked and recorded (trackingMode). Empty: off. Not with agent_reset or
+  /// agent.parallel.
   std::string tracking_record_dir, tracking_replay_dir;
   /// What stops the agents' distillation MILPs in the offline runner: "work"
   /// (deterministic node / iteration limits: a run gives the same result on any

@@ -1,7 +1,8 @@
 // The offline runner's side of tracking record / replay (issue 18;
 // agent/tracking_log.h): which file holds an agent's recording, the key of
 // what determined its tracking, and hooking a pipeline up to record or replay
-// as system.tracking_record_dir / tracking_replay_dir say.
+// as system.tracking_record_dir / tracking_replay_dir say (per agent when
+// both are set).
 #pragma once
 
 #include <cstddef>
@@ -24,10 +25,18 @@ std::string trackingRecordPath(const std::string& dir, const std::string& agent)
 agent::TrackingKey trackingKey(const SystemParams& params, const std::string& agent,
                                const Dataset& dataset, std::size_t frames);
 
+/// How an agent's tracking runs: neither dir set: live; record dir only:
+/// recorded; replay dir only: replayed; both: replayed when the agent's
+/// recording in the replay dir fits this run, else tracked live and recorded
+/// into the record dir (one robot of a recorded set re-tracked, e.g. corrupted).
+enum class TrackingMode { kLive, kRecord, kReplay };
+TrackingMode trackingMode(const SystemParams& params, const std::string& agent,
+                          const Dataset& dataset, std::size_t frames);
+
 /// Record mode: `pipeline` records into DIR/<agent>.htrk (the folder is
 /// created). Replay mode: it replays that file, refused when its key differs
-/// from this run's (the error names the field) or the file is damaged. Neither
-/// set: nothing.
+/// from this run's (the error names the field) or the file is damaged. Live:
+/// nothing.
 Status setUpTrackingRecord(const SystemParams& params, const std::string& agent,
                            const Dataset& dataset, std::size_t frames,
                            agent::AgentPipeline* pipeline);
