@@ -77,6 +77,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   // (DistillParams::trouble_*); raw streaming keeps everything anyway.
   rep.trouble = params_.strategy != "none" && inTrouble(window, hint.health, params_);
   DistillParams troubled = params_;
+  if (budgeted) troubled.max_keyframes = motionKeyframeCap(window, params_);  // a fast window keeps more
   CoordinatorInput link = input;
   if (rep.trouble) {
     troubled.max_keyframes = params_.trouble_max_keyframes;

@@ -250,6 +250,28 @@ std::vector<int> improvePath(const TrimModel& m, std::vector<int> path, int N,
 
 }  // namespace
 
+namespace {
+
+double separation(const SE3& Ta, const SE3& Tb, const DistillParams& params) {
+  return params.trim_w_rot * rotationAngle(Ta.rotation().transpose() * Tb.rotation()) +
+         params.trim_w_trans * (Ta.translation() - Tb.translation()).norm();
+}
+
+}  // namespace
+
+double windowMotion(const Submap& w, const DistillParams& params) {
+  double m = 0;
+  for (std::size_t j = 1; j < w.keyframes.size(); ++j)
+    m += separation(w.keyframes[j - 1].T_A_C, w.keyframes[j].T_A_C, params);
+  return m;
+}
+
+int motionKeyframeCap(const Submap& w, const DistillParams& params) {
+  if (!(params.motion_keyframe_spacing > 0)) return params.max_keyframes;
+  const double n = std::ceil(windowMotion(w, params) / params.motion_keyframe_spacing);
+  return static_cast<int>(std::clamp<double>(n, params.max_keyframes, params.trouble_max_keyframes));
+}
+
 std::vector<double> keyframeSeparation(const Submap& w, const DistillParams& params) {
   const std::size_t n = w.keyframes.size();
   std::vector<double> s(n, 0.0);
@@ -258,11 +280,7 @@ std::vector<double> keyframeSeparation(const Submap& w, const DistillParams& par
     double best = std::numeric_limits<double>::infinity();
     for (std::size_t b = 0; b < n; ++b) {
       if (a == b) continue;
-      const SE3& Ta = w.keyframes[a].T_A_C;
-      const SE3& Tb = w.keyframes[b].T_A_C;
-      const double sd = params.trim_w_rot * rotationAngle(Ta.rotation().transpose() * Tb.rotation()) +
-                        params.trim_w_trans * (Ta.translation() - Tb.translation()).norm();
-      best = std::min(best, sd);
+      best = std::min(best, separation(w.keyframes[a].T_A_C, w.keyframes[b].T_A_C, params));
     }
     s[a] = best;
   }

@@ -8,6 +8,7 @@
 
 #include "distill_fixture.h"
 #include "hermes/distill/distiller.h"
+#include "hermes/distill/keyframe_trimming.h"
 
 namespace hermes {
 namespace distill {
@@ -140,7 +141,7 @@ TEST(Coordinator, ShrinksToFitTheBudget) {
     EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes);
     EXPECT_EQ(r.report.bytes_actual, referenceEncodedSize(r.submap));
     EXPECT_EQ(r.submap.validate(), "");
-    EXPECT_LE(r.report.n_kf, p.max_keyframes);
+    EXPECT_LE(r.report.n_kf, motionKeyframeCap(w.submap, p));
     EXPECT_GT(r.report.n_lm, 0);
     EXPECT_EQ(r.submap.odometry.size(), r.submap.keyframes.size() - 1);
     // Budget-bound instances can be hard for CBC: then the incumbent at the time
@@ -241,6 +242,7 @@ TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
   ASSERT_TRUE(w.ok()) << w.error();
   ASSERT_GE(w->submap.keyframes.size(), 20u);
   DistillParams p;
+  p.motion_keyframe_spacing = 0;  // no motion cap: compared with max_keyframes
   auto run = [&](const DistillParams& params, bool placed) {
     CoordinatorInput in;
     in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
@@ -263,11 +265,38 @@ TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
   EXPECT_LE(run(off, false).n_kf, p.max_keyframes);
 }
 
+// A sound, placed window that moves far keeps up to one keyframe per
+// motion_keyframe_spacing of motion (the fast robots' keyframes are where raw
+// streaming found its extra loops), within the same budget.
+TEST(Coordinator, AFastWindowKeepsKeyframesForItsMotion) {
+  const Expected<SyntheticWindow> w = fastWindow();
+  ASSERT_TRUE(w.ok()) << w.error();
+  DistillParams p;
+  p.motion_keyframe_spacing = windowMotion(w->submap, p) / 20;  // room for 20 keyframes
+  ASSERT_EQ(motionKeyframeCap(w->submap, p), 20);
+  auto run = [&](const DistillParams& params) {
+    CoordinatorInput in;
+    in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
+    return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
+  };
+  const DistillReport fast = run(p);
+  DistillParams off = p;
+  off.motion_keyframe_spacing = 0;
+  const DistillReport capped = run(off);
+  ASSERT_FALSE(fast.deferred || capped.deferred);
+  EXPECT_LE(capped.n_kf, p.max_keyframes);
+  EXPECT_GT(fast.n_kf, p.max_keyframes);
+  EXPECT_LE(fast.n_kf, motionKeyframeCap(w->submap, p));
+  EXPECT_DOUBLE_EQ(fast.budget_bytes, capped.budget_bytes);
+  EXPECT_LE(static_cast<double>(fast.bytes_actual), fast.budget_bytes);
+}
+
 TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
   const Expected<SyntheticWindow> w = fastWindow();
   ASSERT_TRUE(w.ok()) << w.error();
   ASSERT_GE(w->submap.keyframes.size(), 20u);
   DistillParams p;
+  p.motion_keyframe_spacing = 0;  // no motion cap: compared with max_keyframes
   p.trouble_budget_gain = 1.5;  // borrowing (the default, 1, keeps the budget)
   CoordinatorInput in;
   in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (p.eta * p.window_s);

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <set>
 #include <unordered_set>
@@ -145,6 +146,30 @@ TEST(Trimming, SeparationIsTheDistanceToTheNearestOtherKeyframe) {
   EXPECT_NEAR(s[0], 2.0, 1e-12);
   EXPECT_NEAR(s[1], 2.0, 1e-12);
   EXPECT_NEAR(s[2], 4.0, 1e-12);
+}
+
+TEST(Trimming, MotionCapGrowsWithTheWindowsMotionWithinItsBounds) {
+  // 20 keyframes 0.25 m apart, turning 0.05 rad about z each step.
+  auto window = [](double step_m) {
+    Submap w;
+    w.cameras.push_back(eurocCam0Intrinsics());
+    for (int k = 0; k < 20; ++k) {
+      Keyframe kf;
+      kf.id = static_cast<KeyframeId>(k + 1);
+      kf.T_A_C = SE3(Eigen::AngleAxisd(0.05 * k, Vec3::UnitZ()).toRotationMatrix(), Vec3(step_m * k, 0, 0));
+      w.keyframes.push_back(kf);
+    }
+    return w;
+  };
+  DistillParams params;  // w_trans 2 / m, w_rot 5.73 / rad
+  const double motion = 19 * (params.trim_w_trans * 0.25 + params.trim_w_rot * 0.05);
+  EXPECT_NEAR(windowMotion(window(0.25), params), motion, 1e-9);
+  params.motion_keyframe_spacing = 0;  // off
+  EXPECT_EQ(motionKeyframeCap(window(0.25), params), params.max_keyframes);
+  params.motion_keyframe_spacing = 1.0;
+  EXPECT_EQ(motionKeyframeCap(window(0.25), params), static_cast<int>(std::ceil(motion)));  // 15
+  EXPECT_EQ(motionKeyframeCap(window(0.0), params), params.max_keyframes);  // turning only: 6 -> floor
+  EXPECT_EQ(motionKeyframeCap(window(1.0), params), params.trouble_max_keyframes);  // 44 -> ceiling
 }
 
 TEST(Trimming, AppliedTrimDropsOrphansAndAddsOdometry) {

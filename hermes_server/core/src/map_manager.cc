@@ -4,6 +4,7 @@
 #include "map_manager_detail.h"
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdlib>
 #include <iterator>
@@ -32,11 +33,13 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"duplicate_neighbours", &duplicate_neighbours},
                    IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops},
                    IntKey{"closure_budget", &closure_budget},
-                   IntKey{"deferred_closures", &deferred_closures}})
+                   IntKey{"deferred_closures", &deferred_closures},
+                   IntKey{"sparse_pair_loops", &sparse_pair_loops}})
     if (config.has(p + k.name))
       if (Status s = config.get(p + k.name, k.v); !s) return s;
   for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
-                         {"spatial_max_angle_deg", &spatial_max_angle_deg}})
+                         {"spatial_max_angle_deg", &spatial_max_angle_deg},
+                         {"sparse_pair_sigma_m", &sparse_pair_sigma_m}})
     if (config.has(p + name))
       if (Status s = config.get(p + name, v); !s) return s;
   if (Status s = odometry.read(config); !s) return s;
@@ -63,6 +66,8 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "duplicate_min_pair_loops", duplicate_min_pair_loops);
   out.set(p + "closure_budget", closure_budget);
   out.set(p + "deferred_closures", deferred_closures);
+  out.set(p + "sparse_pair_loops", sparse_pair_loops);
+  out.set(p + "sparse_pair_sigma_m", sparse_pair_sigma_m);
 }
 
 Status MapManagerParams::validate() const {
@@ -81,8 +86,21 @@ Status MapManagerParams::validate() const {
   if (duplicate_min_pair_loops < 0) return Error{"duplicate_min_pair_loops must be >= 0"};
   if (closure_budget < 0) return Error{"closure_budget must be >= 0 (0 = verify all)"};
   if (deferred_closures < 0) return Error{"deferred_closures must be >= 0"};
+  if (sparse_pair_loops < 0) return Error{"sparse_pair_loops must be >= 0 (0 = off)"};
+  if (!(sparse_pair_sigma_m > 0) || !std::isfinite(sparse_pair_sigma_m))
+    return Error{"sparse_pair_sigma_m must be > 0"};
   return Status::Ok();
 }
+
+namespace {
+
+LoopClosureParams sparseGate(const MapManagerParams& p) {
+  LoopClosureParams lc = p.loop_closure;
+  lc.max_translation_sigma_m = std::max(lc.max_translation_sigma_m, p.sparse_pair_sigma_m);
+  return lc;
+}
+
+}  // namespace
 
 MapManager::MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerParams params,
                        Bookkeeper* bookkeeper)
@@ -90,7 +108,8 @@ MapManager::MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerP
       params_(std::move(params)),
       bookkeeper_(bookkeeper),
       recognizer_(vocabulary_, params_.place_recognition),
-      closer_(params_.loop_closure) {}
+      closer_(params_.loop_closure),
+      sparse_closer_(sparseGate(params_)) {}
 
 Mat6 MapManager::bridgeInformation(const Keyframe& from, const Keyframe& to) const {
   return odometryInformation(from.T_A_C.inverse() * to.T_A_C, -1, to.lost_before, params_.odometry);

@@ -44,7 +44,8 @@ std::vector<const Keyframe*> MapManager::neighbours(const KeyframeKey& key,
   return out;
 }
 
-LoopClosureResult MapManager::verifyPair(const KeyframeKey& query, const KeyframeKey& candidate) const {
+LoopClosureResult MapManager::verifyPair(const KeyframeKey& query, const KeyframeKey& candidate,
+                                         bool sparse) const {
   LoopClosureResult r;
   const StoredKeyframe* q = map_.keyframe(query);
   const StoredKeyframe* c = map_.keyframe(candidate);
@@ -55,7 +56,7 @@ LoopClosureResult MapManager::verifyPair(const KeyframeKey& query, const Keyfram
   std::vector<PinholeIntrinsics> qcams, ccams;
   const std::vector<const Keyframe*> qn = neighbours(query, &qcams);
   const std::vector<const Keyframe*> cn = neighbours(candidate, &ccams);
-  return closer_.close(q->keyframe, qn, qcams, c->keyframe, cn, ccams);
+  return (sparse ? sparse_closer_ : closer_).close(q->keyframe, qn, qcams, c->keyframe, cn, ccams);
 }
 
 std::vector<LoopClosureResult> MapManager::verifyPairs(
@@ -63,9 +64,18 @@ std::vector<LoopClosureResult> MapManager::verifyPairs(
   std::vector<LoopClosureResult> results(pairs.size());
   std::vector<double> ms(pairs.size(), 0.0);
   const auto t0 = Clock::now();
+  // Sparse ties as the merge starts (the same for any loop_threads).
+  std::vector<char> sparse(pairs.size(), 0);
+  if (params_.sparse_pair_loops > 0 && !pairs.empty()) {
+    const std::map<TrajectoryPair, int> accepted = acceptedLoopsPerPair(map_.loops);
+    for (std::size_t i = 0; i < pairs.size(); ++i) {
+      auto it = accepted.find(pairOf(pairs[i].first, pairs[i].second));
+      sparse[i] = (it == accepted.end() ? 0 : it->second) < params_.sparse_pair_loops;
+    }
+  }
   runParallelJobs(pairs.size(), params_.loop_threads, [&](std::size_t i) {
     const auto t = Clock::now();
-    results[i] = verifyPair(pairs[i].first, pairs[i].second);
+    results[i] = verifyPair(pairs[i].first, pairs[i].second, sparse[i]);
     ms[i] = msSince(t);
   });
   if (!pairs.empty()) timings_.add("loop_batch", msSince(t0));

@@ -35,6 +35,15 @@ namespace distill {
 /// s_j of every keyframe of the window (0 for a single keyframe).
 std::vector<double> keyframeSeparation(const Submap& window, const DistillParams& params);
 
+/// The window's motion in separation units: the sum over consecutive keyframes
+/// of trim_w_rot x angle + trim_w_trans x distance.
+double windowMotion(const Submap& window, const DistillParams& params);
+
+/// Keyframes a window may keep for its motion: ceil(windowMotion /
+/// motion_keyframe_spacing) clamped to [max_keyframes, trouble_max_keyframes];
+/// max_keyframes when the spacing is 0.
+int motionKeyframeCap(const Submap& window, const DistillParams& params);
+
 /// Number of landmarks keyframes a and b (indices) both observe.
 int sharedLandmarks(const Submap& window, std::size_t a, std::size_t b);
 

@@ -134,6 +134,15 @@ struct DistillParams {
   int trouble_weak_frames = 3;
   int trouble_max_keyframes = 24;
   double trouble_budget_gain = 1.0;
+  // A window that moves far keeps up to one keyframe per motion_keyframe_spacing
+  // of motion (the trimming's separation units: trim_w_trans per metre plus
+  // trim_w_rot per radian, 1 = 0.5 m or ~10 deg), between max_keyframes and
+  // trouble_max_keyframes (motionKeyframeCap), with the coordinator on (fixed K
+  // keeps max_keyframes). The fast robots' keyframes are
+  // the ones raw streaming's extra loops stand on (whole MH, unlimited: 12
+  // keyframes a window 0.74 cm / 40.7 MB, 1.5 -> 0.67 cm / 42.8 MB; 1.0 ->
+  // 0.69 / 48.8; 16 for every window 0.68 / 50.0). 0 = off.
+  double motion_keyframe_spacing = 1.5;
 
   // Initial byte model.
   double bytes_c0 = 256;
