@@ -248,10 +248,6 @@ std::vector<int> improvePath(const TrimModel& m, std::vector<int> path, int N,
   return path;
 }
 
-}  // namespace
-
-namespace {
-
 double separation(const SE3& Ta, const SE3& Tb, const DistillParams& params) {
   return params.trim_w_rot * rotationAngle(Ta.rotation().transpose() * Tb.rotation()) +
          params.trim_w_trans * (Ta.translation() - Tb.translation()).norm();
