@@ -17,8 +17,6 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
-
 struct Seen {
   KeyframeKey query, candidate;
   int qpos = -1, cpos = -1;  ///< positions in their trajectories when tried
@@ -89,11 +87,7 @@ bool sameTrajectory(const KeyframeKey& a, const KeyframeKey& b) {
 class DuplicateClosures : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    fixture::Options options;
-    options.keypoints = 200;
-    auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 15.0, -1},
-                                    {kGt + "MH_02_easy.txt", 0.0, 15.0, -1}},
-                                   options);
+    auto fx = fixture::hallPair(15.0, 200);
     ASSERT_TRUE(fx.ok()) << fx.error();
     fx_ = new fixture::Fixture(*fx);
     off_ = new Trace(run(*fx, 0));

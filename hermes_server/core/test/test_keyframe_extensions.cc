@@ -15,8 +15,6 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
-
 /// The keypoints from index `from` on, as extensions of `s`'s keyframes.
 std::vector<Keyframe> tailAsExtensions(const Submap& s, std::size_t from) {
   std::vector<Keyframe> out;
@@ -58,11 +56,7 @@ class KeyframeExtensions : public ::testing::TestWithParam<int> {};
 // measure the loops again itself: they wait with the deferred closures and are
 // measured while no submap waits (process() after the queue drained).
 TEST_P(KeyframeExtensions, AppendKeypointsToStoredKeyframesAndReverifyTheirLoops) {
-  fixture::Options options;
-  options.keypoints = 240;
-  auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 16.0, -1},
-                                  {kGt + "MH_02_easy.txt", 0.0, 16.0, -1}},
-                                 options);
+  auto fx = fixture::hallPair(16.0, 240);
   ASSERT_TRUE(fx.ok()) << fx.error();
   ServerParams params;
   params.map.closure_budget = GetParam();

@@ -12,8 +12,6 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
-
 struct Trace {
   std::vector<std::string> attempts;  ///< every attempt: query, candidate, status, inliers
   std::vector<LoopEdge> loops;
@@ -56,11 +54,7 @@ Trace run(const fixture::Fixture& fx, int threads) {
 }
 
 TEST(LoopThreads, OneAndTwoThreadsFindTheSameLoopsInTheSameOrder) {
-  fixture::Options options;
-  options.keypoints = 200;
-  auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 15.0, -1},
-                                  {kGt + "MH_02_easy.txt", 0.0, 15.0, -1}},
-                                 options);
+  auto fx = fixture::hallPair(15.0, 200);
   ASSERT_TRUE(fx.ok()) << fx.error();
   const Trace one = run(*fx, 1), two = run(*fx, 2);
   ASSERT_GT(one.loops.size(), 5u);  // there is something to compare

@@ -13,7 +13,6 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
 constexpr double kTightGate = 0.002;  // [m] most right closures of the clip fail it
 
 struct Outcome {
@@ -35,13 +34,10 @@ Outcome run(const fixture::Fixture& fx, int sparse_pair_loops) {
     if (a.candidate && a.status == LoopStatus::kDegenerate) ++o.degenerate;
   });
   double now = 0;
-  for (std::size_t r = 0; r < fx.agents[0].frames.size() || r < fx.agents[1].frames.size(); ++r)
-    for (const auto& agent : fx.agents) {
-      if (r >= agent.frames.size()) continue;
-      EXPECT_EQ(server.onFrame(agent.frames[r].data(), agent.frames[r].size(), nullptr, now += 1).verdict,
-                ArrivalVerdict::kAccept);
-      server.process(now, 1);
-    }
+  for (const std::vector<std::uint8_t>* frame : fixture::roundRobin(fx)) {
+    EXPECT_EQ(server.onFrame(frame->data(), frame->size(), nullptr, now += 1).verdict, ArrivalVerdict::kAccept);
+    server.process(now, 1);
+  }
   EXPECT_EQ(server.counters().merge_errors, 0u) << server.counters().last_error;
   o.accepted = server.mapManager().loopsAccepted();
   o.merged = server.mapManager().agentsMerged();
@@ -49,11 +45,7 @@ Outcome run(const fixture::Fixture& fx, int sparse_pair_loops) {
 }
 
 TEST(SparsePairGate, LooseLoopsOnlyWhileThePairIsSparselyTied) {
-  fixture::Options options;
-  options.keypoints = 200;
-  auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 15.0, -1},
-                                  {kGt + "MH_02_easy.txt", 0.0, 15.0, -1}},
-                                 options);
+  auto fx = fixture::hallPair(15.0, 200);
   ASSERT_TRUE(fx.ok()) << fx.error();
   const Outcome off = run(*fx, 0);        // the tight gate everywhere
   const Outcome few = run(*fx, 3);        // loose for a pair's first 3 loops

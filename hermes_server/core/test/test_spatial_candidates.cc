@@ -10,8 +10,6 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
-
 struct Outcome {
   int place_accepted_late = 0, map_accepted_late = 0, map_attempts = 0, map_far = 0;
 };
@@ -19,11 +17,7 @@ struct Outcome {
 /// Two robots on MH_01 / MH_02 (the same hall); after `blind_after` seconds
 /// the place recognition proposes nothing (as in poor light).
 Outcome run(int spatial_candidates, double blind_after) {
-  fixture::Options options;
-  options.keypoints = 200;
-  auto fx = fixture::makeFixture({{kGt + "MH_01_easy.txt", 0.0, 20.0, -1},
-                                  {kGt + "MH_02_easy.txt", 0.0, 20.0, -1}},
-                                 options);
+  auto fx = fixture::hallPair(20.0, 200);
   EXPECT_TRUE(fx.ok()) << fx.error();
   ServerParams params;
   params.map.spatial_candidates = spatial_candidates;

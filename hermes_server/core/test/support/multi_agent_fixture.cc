@@ -200,6 +200,14 @@ std::vector<const std::vector<std::uint8_t>*> roundRobin(const Fixture& fx) {
   return out;
 }
 
+Expected<Fixture> hallPair(double seconds, int keypoints) {
+  const std::string gt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+  Options options;
+  options.keypoints = keypoints;
+  return makeFixture({{gt + "MH_01_easy.txt", 0.0, seconds, -1}, {gt + "MH_02_easy.txt", 0.0, seconds, -1}},
+                     options);
+}
+
 }  // namespace fixture
 }  // namespace server
 }  // namespace hermes
