@@ -278,7 +278,10 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
     std::error_code mk;
     fs::create_directories(out_dir, mk);
     if (Status w = system::writeRunResults(**run, r, out_dir); !w) return Error{w.error()};
-    std::ofstream((fs::path(out_dir) / "config_used.yaml").string()) << params->yaml();  // bench pose_graph
+    const fs::path cfg_path = fs::path(out_dir) / "config_used.yaml";  // what bench pose_graph reads
+    std::ofstream cfg(cfg_path);
+    cfg << params->yaml();
+    if (!cfg) return Error{"cannot write " + cfg_path.string()};
     if (v != "false_candidates")
       if (Status w = system::writeLoopAttempts(**run, attempts, (fs::path(out_dir) / "loop_attempts.csv").string()); !w)
         return Error{w.error()};
