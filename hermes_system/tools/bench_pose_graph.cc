@@ -10,6 +10,7 @@
 //          through its odometry edges (a cold start, as a new solve sees it);
 //   --init file: start from the run's own final poses.
 // Prints JSON on stdout (or --json FILE) and a table on stderr.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -18,6 +19,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -49,7 +51,11 @@ const char* kUsage =
     "            ground truth: agent,stamp,x,y,z,gt_x,gt_y,gt_z,error_m\n"
     "  --ground-truth-loops\n"
     "            replace every loop's measurement by the ground-truth relative pose\n"
-    "            (what-if: how much do the loops' own errors cost?)\n";
+    "            (what-if: how much do the loops' own errors cost?)\n"
+    "  --align-on A[,B...]\n"
+    "            take the one common alignment from these agents' nodes only (every\n"
+    "            agent is still judged under it): does a robot whose map is off move\n"
+    "            the others, or only the alignment they are judged under?\n";
 
 struct NodeInfo {
   std::string agent;
@@ -113,14 +119,16 @@ struct Judged {
 
 constexpr double kRpeDeltaS = 10.0;
 
-/// ATE of the poses against ground truth under one rigid alignment over all.
+/// ATE of the poses against ground truth under one rigid alignment over all
+/// (taken from the agents in `align_on` only, when it is not empty).
 Expected<Judged> judge(const std::vector<std::pair<KeyframeKey, SE3>>& nodes,
-                       const std::vector<NodeInfo>& info) {
+                       const std::vector<NodeInfo>& info, const std::set<std::string>& align_on = {}) {
   eval::Association all;
   std::map<std::string, eval::Association> per;
   for (std::size_t i = 0; i < nodes.size(); ++i) {
     if (!info[i].has_gt) continue;
     for (eval::Association* a : {&all, &per[info[i].agent]}) {
+      if (a == &all && !align_on.empty() && !align_on.count(info[i].agent)) continue;
       a->t.push_back(info[i].stamp);
       a->gt.push_back(info[i].T_W_C_gt);
       a->est.push_back(nodes[i].second);
@@ -132,6 +140,16 @@ Expected<Judged> judge(const std::vector<std::pair<KeyframeKey, SE3>>& nodes,
   Judged j;
   j.all = common->trans_m.rmse;
   j.alignment = common->alignment;
+  if (!align_on.empty()) {  // "all" over every agent, under that alignment
+    eval::Association every;
+    for (const auto& [name, a] : per)
+      for (std::size_t k = 0; k < a.t.size(); ++k) {
+        every.t.push_back(a.t[k]);
+        every.gt.push_back(a.gt[k]);
+        every.est.push_back(a.est[k]);
+      }
+    j.all = eval::ateWithAlignment(every, common->alignment).trans_m.rmse;
+  }
   eval::EvalParams rpe;
   rpe.rpe_delta_s = kRpeDeltaS;
   rpe.rpe_tolerance = 0.5;
@@ -158,6 +176,7 @@ int main(int argc, char** argv) {
   bool gt_loops = false;
   std::string poses_out;
   std::vector<std::string> sets;
+  std::set<std::string> align_on;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&](std::string* out) {
@@ -188,6 +207,12 @@ int main(int argc, char** argv) {
       (a[2] == 'l' ? loop_scale : odometry_scale) = x;
     } else if (a == "--poses") {
       value(&poses_out);
+    } else if (a == "--align-on") {
+      std::string v;
+      value(&v);
+      std::stringstream ls(v);
+      for (std::string name; std::getline(ls, name, ',');)
+        if (!name.empty()) align_on.insert(name);
     } else if (a == "--ground-truth-loops") {
       gt_loops = true;
     } else if (a == "--json") {
@@ -230,7 +255,10 @@ int main(int argc, char** argv) {
     const NodeInfo &a = (*info)[index.at(e.a)], &b = (*info)[index.at(e.b)];
     if (gt_loops && e.loop && a.has_gt && b.has_gt) e.T_a_b = a.T_W_C_gt.inverse() * b.T_W_C_gt;
   }
-  Expected<Judged> as_run = judge(file->nodes, *info);
+  for (const std::string& name : align_on)
+    if (std::none_of(info->begin(), info->end(), [&](const NodeInfo& n) { return n.agent == name; }))
+      return fail("--align-on: no agent '" + name + "' in " + (dir / "pose_graph_nodes.csv").string(), 2);
+  Expected<Judged> as_run = judge(file->nodes, *info, align_on);
   if (!as_run) return fail(as_run.error(), 1);
   server::PoseGraphFile chained = *file;
   chainOdometry(&chained);
@@ -257,7 +285,7 @@ int main(int argc, char** argv) {
   if (!r) return fail(r.error(), 1);
   std::vector<std::pair<KeyframeKey, SE3>> solved;
   for (const auto& [key, T] : file->nodes) solved.emplace_back(key, *graph->pose(key));
-  Expected<Judged> now = judge(solved, *info);
+  Expected<Judged> now = judge(solved, *info, align_on);
   if (!now) return fail(now.error(), 1);
   if (!poses_out.empty()) {
     std::ofstream o(poses_out);
@@ -281,6 +309,7 @@ int main(int argc, char** argv) {
   j["loop_information_scale"] = loop_scale;
   j["odometry_information_scale"] = odometry_scale;
   j["ground_truth_loops"] = gt_loops;
+  if (!align_on.empty()) j["align_on"] = std::vector<std::string>(align_on.begin(), align_on.end());
   j["nodes"] = graph->numNodes();
   j["odometry_edges"] = graph->numOdometryEdges();
   j["loop_edges"] = graph->numLoopEdges();
