@@ -134,18 +134,18 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
     timings_.add("place_recognition", msSince(t0));
     if (candidate_hook_) candidate_hook_(key, &places.candidates);
     stats->place_candidates += static_cast<int>(places.candidates.size());
-    if (places.candidates.empty()) jobs.push_back(LoopJob{key, std::nullopt, false});
+    if (places.candidates.empty()) jobs.push_back(LoopJob{key, std::nullopt, false, std::nullopt});
     std::vector<KeyframeKey> tried;
     for (const PlaceCandidate& c : places.candidates) {
       if (static_cast<int>(tried.size()) >= params_.max_candidates_per_keyframe) break;
       if (!map_.keyframe(c.key) || c.key == key) continue;
       tried.push_back(c.key);
-      jobs.push_back(LoopJob{key, c, false});
+      jobs.push_back(LoopJob{key, c, false, std::nullopt});
     }
     for (const KeyframeKey& k : spatialCandidates(key, q->keyframe.stamp, tried)) {
       PlaceCandidate c;
       c.key = k;
-      jobs.push_back(LoopJob{key, c, true});
+      jobs.push_back(LoopJob{key, c, true, std::nullopt});
     }
   }
   // Near-duplicates wait for a second round: verified only when none of the
