@@ -52,6 +52,8 @@ const char* kUsage =
     "  --ground-truth-loops\n"
     "            replace every loop's measurement by the ground-truth relative pose\n"
     "            (what-if: how much do the loops' own errors cost?)\n"
+    "  --edges FILE   write every edge after the solve: kind,agent_a,stamp_a,agent_b,stamp_b,\n"
+    "            residual_m,chi2,weight (weight: robust loss and re-weighting, 1 = fully trusted)\n"
     "  --align-on A[,B...]\n"
     "            take the one common alignment from these agents' nodes only (every\n"
     "            agent is still judged under it): does a robot whose map is off move\n"
@@ -174,7 +176,7 @@ int main(int argc, char** argv) {
   std::string run_dir, init = "odometry", json_out;
   double loop_scale = 1, odometry_scale = 1;
   bool gt_loops = false;
-  std::string poses_out;
+  std::string poses_out, edges_out;
   std::vector<std::string> sets;
   std::set<std::string> align_on;
   for (int i = 1; i < argc; ++i) {
@@ -207,6 +209,8 @@ int main(int argc, char** argv) {
       (a[2] == 'l' ? loop_scale : odometry_scale) = x;
     } else if (a == "--poses") {
       value(&poses_out);
+    } else if (a == "--edges") {
+      value(&edges_out);
     } else if (a == "--align-on") {
       std::string v;
       value(&v);
@@ -300,6 +304,17 @@ int main(int argc, char** argv) {
         << ',' << g.y() << ',' << g.z() << ',' << (p - g).norm() << '\n';
     }
     if (!o) return fail("cannot write " + poses_out, 1);
+  }
+  if (!edges_out.empty()) {
+    std::ofstream o(edges_out);
+    o.precision(10);
+    o << "kind,agent_a,stamp_a,agent_b,stamp_b,residual_m,chi2,weight\n";
+    for (const server::EdgeResidual& e : graph->residuals()) {
+      const NodeInfo &a = (*info)[index.at(e.a)], &b = (*info)[index.at(e.b)];
+      o << (e.loop ? "loop" : "odometry") << ',' << a.agent << ',' << a.stamp << ',' << b.agent << ','
+        << b.stamp << ',' << e.error_m << ',' << e.chi2 << ',' << e.weight << '\n';
+    }
+    if (!o) return fail("cannot write " + edges_out, 1);
   }
 
   nlohmann::json j;

@@ -230,6 +230,11 @@ TEST(PoseGraph, RejectsBadInput) {
   PoseGraphParams p;
   p.loop_loss = "tukeyish";
   EXPECT_FALSE(p.validate().ok());
+  PoseGraphParams q;
+  q.odometry_reweight_span = -1;
+  const Status span = q.validate();
+  ASSERT_FALSE(span.ok());
+  EXPECT_NE(span.error().find("odometry_reweight_span"), std::string::npos);
 }
 
 }  // namespace
