@@ -47,7 +47,7 @@ struct PoseGraphParams {
   /// 30-s meeting clip with a 3 % drift: the sound robot 1.58 (trajectory) /
   /// 1.40 cm (both; 0.90 clean).
   int odometry_reweight_rounds = 5;
-  std::string odometry_reweight_scope = "both";  ///< trajectory | local | both
+  std::string odometry_reweight_scope = "local";  ///< trajectory | local | both
   int odometry_reweight_window = 5;    ///< [edges] each side (scope local)
   double odometry_reweight_max = 100;  ///< largest covariance scale
   double odometry_reweight_floor = 0.01;  ///< [chi2 per dof] floor of the median
