@@ -125,33 +125,24 @@ constexpr double kRpeDeltaS = 10.0;
 /// (taken from the agents in `align_on` only, when it is not empty).
 Expected<Judged> judge(const std::vector<std::pair<KeyframeKey, SE3>>& nodes,
                        const std::vector<NodeInfo>& info, const std::set<std::string>& align_on = {}) {
-  eval::Association all;
+  eval::Association all, fit;  // fit: the nodes the alignment is taken from
   std::map<std::string, eval::Association> per;
   for (std::size_t i = 0; i < nodes.size(); ++i) {
     if (!info[i].has_gt) continue;
-    for (eval::Association* a : {&all, &per[info[i].agent]}) {
-      if (a == &all && !align_on.empty() && !align_on.count(info[i].agent)) continue;
+    const bool fits = align_on.empty() || align_on.count(info[i].agent);
+    for (eval::Association* a : {&all, &fit, &per[info[i].agent]}) {
+      if (a == &fit && !fits) continue;
       a->t.push_back(info[i].stamp);
       a->gt.push_back(info[i].T_W_C_gt);
       a->est.push_back(nodes[i].second);
     }
   }
-  if (all.matched() < 3) return Error{"fewer than 3 nodes with ground truth"};
-  Expected<eval::AteResult> common = eval::computeAte(all, eval::AlignMode::kSE3);
+  if (fit.matched() < 3) return Error{"fewer than 3 nodes with ground truth"};
+  Expected<eval::AteResult> common = eval::computeAte(fit, eval::AlignMode::kSE3);
   if (!common) return Error{common.error()};
   Judged j;
-  j.all = common->trans_m.rmse;
   j.alignment = common->alignment;
-  if (!align_on.empty()) {  // "all" over every agent, under that alignment
-    eval::Association every;
-    for (const auto& [name, a] : per)
-      for (std::size_t k = 0; k < a.t.size(); ++k) {
-        every.t.push_back(a.t[k]);
-        every.gt.push_back(a.gt[k]);
-        every.est.push_back(a.est[k]);
-      }
-    j.all = eval::ateWithAlignment(every, common->alignment).trans_m.rmse;
-  }
+  j.all = align_on.empty() ? common->trans_m.rmse : eval::ateWithAlignment(all, j.alignment).trans_m.rmse;
   eval::EvalParams rpe;
   rpe.rpe_delta_s = kRpeDeltaS;
   rpe.rpe_tolerance = 0.5;
@@ -307,7 +298,7 @@ int main(int argc, char** argv) {
   }
   if (!edges_out.empty()) {
     std::ofstream o(edges_out);
-    o.precision(10);
+    o.precision(15);  // stamps are ~1.4e9 s
     o << "kind,agent_a,stamp_a,agent_b,stamp_b,residual_m,chi2,weight\n";
     for (const server::EdgeResidual& e : graph->residuals()) {
       const NodeInfo &a = (*info)[index.at(e.a)], &b = (*info)[index.at(e.b)];

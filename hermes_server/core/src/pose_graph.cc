@@ -348,9 +348,8 @@ std::vector<double> PoseGraph::stretchLevels(const TrajectoryEdges& traj) const 
         T = T * e.T_a_b;
         const int len = j - k + 1;
         if ((len & (len - 1)) != 0) continue;  // powers of two only
-        const Edge stretch{first.a, e.b, T, Mat6::Identity()};
-        const Node& a = nodes_.at(stretch.a);
-        const Node& b = nodes_.at(stretch.b);
+        const Node& a = nodes_.at(first.a);
+        const Node& b = nodes_.at(e.b);
         double r[6];
         RelativePoseError(T, Mat6::Identity())(a.q.data(), a.t.data(), b.q.data(), b.t.data(), r);
         const Vec6 err = Eigen::Map<const Vec6>(r);
