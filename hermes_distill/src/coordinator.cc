@@ -126,7 +126,8 @@ CoordinatorPlan chooseK(const Submap& trimmed, double budget, const ByteModel& m
 }
 
 CoordinatorPlan planDistillation(const Submap& w, double budget, const ByteModel& model,
-                                 const KeptModel& kept, const DistillParams& params) {
+                                 const KeptModel& kept, const DistillParams& params,
+                                 int surplus_max_keyframes) {
   CoordinatorPlan plan;
   const int n = static_cast<int>(w.keyframes.size());
   const int n_min = keyframeFloor(w, params);
@@ -143,6 +144,14 @@ CoordinatorPlan planDistillation(const Submap& w, double budget, const ByteModel
       if (bytes(nk, k) <= limit) return k;
     return -1;
   };
+  // 0) A fast window's keyframes beyond n_max, only where each still carries k_max.
+  for (int nk = std::min(n, surplus_max_keyframes); nk > n_max; --nk) {
+    if (bytes(nk, params.k_max) > target) continue;
+    plan.n_kf = nk;
+    plan.k = params.k_max;
+    plan.predicted_bytes = bytes(nk, plan.k);
+    return plan;
+  }
   // 1) The most keyframes that still carry the preferred K; then the largest K.
   for (int nk = n_max; nk >= n_min; --nk) {
     if (bytes(nk, k_pref) > target) continue;

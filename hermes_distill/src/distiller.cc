@@ -77,7 +77,8 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   // (DistillParams::trouble_*); raw streaming keeps everything anyway.
   rep.trouble = params_.strategy != "none" && inTrouble(window, hint.health, params_);
   DistillParams troubled = params_;
-  if (budgeted) troubled.max_keyframes = motionKeyframeCap(window, params_);  // a fast window keeps more
+  // A fast window keeps more keyframes, from the budget's surplus only (planDistillation).
+  const int motion_cap = budgeted ? motionKeyframeCap(window, params_) : 0;
   CoordinatorInput link = input;
   if (rep.trouble) {
     troubled.max_keyframes = params_.trouble_max_keyframes;
@@ -138,7 +139,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   int n_kf = std::min<int>(prm.max_keyframes, static_cast<int>(window.keyframes.size()));
   int k = prm.fixed_k;
   if (budgeted) {
-    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, kept_, prm);
+    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, kept_, prm, motion_cap);
     if (plan.defer) {
       rep.deferred = true;
       rep.defer_reason = plan.reason;

@@ -267,28 +267,38 @@ TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
 
 // A sound, placed window that moves far keeps up to one keyframe per
 // motion_keyframe_spacing of motion (the fast robots' keyframes are where raw
-// streaming found its extra loops), within the same budget.
-TEST(Coordinator, AFastWindowKeepsKeyframesForItsMotion) {
+// streaming found its extra loops), from the budget's surplus only: on a tight
+// link the extra keyframes would take landmarks from the others.
+TEST(Coordinator, AFastWindowKeepsKeyframesForItsMotionFromTheSurplusOnly) {
   const Expected<SyntheticWindow> w = fastWindow();
   ASSERT_TRUE(w.ok()) << w.error();
   DistillParams p;
   p.motion_keyframe_spacing = windowMotion(w->submap, p) / 20;  // room for 20 keyframes
   ASSERT_EQ(motionKeyframeCap(w->submap, p), 20);
-  auto run = [&](const DistillParams& params) {
-    CoordinatorInput in;
-    in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
-    return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
-  };
-  const DistillReport fast = run(p);
   DistillParams off = p;
   off.motion_keyframe_spacing = 0;
-  const DistillReport capped = run(off);
+  auto run = [&](const DistillParams& params, double share_of_raw) {
+    CoordinatorInput in;
+    in.bandwidth_Bps = share_of_raw * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
+    return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
+  };
+  // A link with room: more keyframes, each at k_max, within the budget.
+  const DistillReport fast = run(p, 2.0), capped = run(off, 2.0);
   ASSERT_FALSE(fast.deferred || capped.deferred);
   EXPECT_LE(capped.n_kf, p.max_keyframes);
   EXPECT_GT(fast.n_kf, p.max_keyframes);
   EXPECT_LE(fast.n_kf, motionKeyframeCap(w->submap, p));
+  EXPECT_EQ(fast.k, p.k_max);
   EXPECT_DOUBLE_EQ(fast.budget_bytes, capped.budget_bytes);
   EXPECT_LE(static_cast<double>(fast.bytes_actual), fast.budget_bytes);
+  // A tight link (K below k_max without the cap): the same plan as without it.
+  double share = 0.5;
+  while (share > 0.01 && run(off, share).k >= p.k_max) share *= 0.7;
+  const DistillReport tight = run(p, share), tight_off = run(off, share);
+  ASSERT_FALSE(tight.deferred || tight_off.deferred) << share;
+  EXPECT_EQ(tight.n_kf, tight_off.n_kf);
+  EXPECT_EQ(tight.k, tight_off.k);
+  EXPECT_LT(tight.k, p.k_max);
 }
 
 TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {

@@ -121,8 +121,14 @@ CoordinatorPlan chooseK(const Submap& trimmed, double budget, const ByteModel& m
 /// at that N_KF; if even the floor cannot carry k_pref, the floor with the
 /// largest K down to k_min (against S itself when plan_fill · S is too little).
 /// Defers when nothing at or above the floor fits S.
+/// `surplus_max_keyframes` (a fast window's motionKeyframeCap): keyframes above
+/// max_keyframes, up to this many, are kept only from the budget's surplus, when
+/// every one of them still carries K = k_max within plan_fill · S; they never
+/// take landmarks from the others (whole MH at 2 Mbit/s: taken from K, the motion
+/// cap made the merged map 1.04 -> 1.29 cm).
 CoordinatorPlan planDistillation(const Submap& window, double budget, const ByteModel& model,
-                                 const KeptModel& kept, const DistillParams& params);
+                                 const KeptModel& kept, const DistillParams& params,
+                                 int surplus_max_keyframes = 0);
 
 }  // namespace distill
 }  // namespace hermes
