@@ -141,8 +141,10 @@ struct DistillParams {
   // keeps max_keyframes). The fast robots' keyframes are
   // the ones raw streaming's extra loops stand on (whole MH, unlimited: 12
   // keyframes a window 0.74 cm / 40.7 MB, 1.5 -> 0.67 cm / 42.8 MB; 1.0 ->
-  // 0.69 / 48.8; 16 for every window 0.68 / 50.0). 0 = off.
-  double motion_keyframe_spacing = 1.5;
+  // 0.69 / 48.8; 16 for every window 0.68 / 50.0). 1.5 -> 1.25 with three place
+  // candidates per keyframe on the server: 10 Mbit/s 0.69 -> 0.65 cm, 42.3 ->
+  // 44.6 MB (1.07x raw streaming at 32 % of its bytes; README sixteenth pass). 0 = off.
+  double motion_keyframe_spacing = 1.25;
 
   // Initial byte model.
   double bytes_c0 = 256;

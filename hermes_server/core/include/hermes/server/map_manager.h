@@ -44,7 +44,7 @@ struct MapManagerParams {
   MapRefinementParams refinement;            ///< server.refinement.*
   // server.map.*
   int rig_neighbours = 2;              ///< m neighbours per rig side
-  int max_candidates_per_keyframe = 2; ///< place candidates verified per keyframe
+  int max_candidates_per_keyframe = 3; ///< place candidates verified per keyframe
   /// Map-based candidates: once its robot is anchored, a new keyframe is also
   /// tried against up to this many stored keyframes near its estimated world
   /// pose (nearest first, not next to a place candidate already tried, the
