@@ -146,10 +146,11 @@ CoordinatorPlan planDistillation(const Submap& w, double budget, const ByteModel
   };
   // 0) A fast window's keyframes beyond n_max, only where each still carries k_max.
   for (int nk = std::min(n, surplus_max_keyframes); nk > n_max; --nk) {
-    if (bytes(nk, params.k_max) > target) continue;
+    const double predicted = bytes(nk, params.k_max);
+    if (predicted > target) continue;
     plan.n_kf = nk;
     plan.k = params.k_max;
-    plan.predicted_bytes = bytes(nk, plan.k);
+    plan.predicted_bytes = predicted;
     return plan;
   }
   // 1) The most keyframes that still carry the preferred K; then the largest K.
