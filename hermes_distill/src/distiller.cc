@@ -18,11 +18,22 @@ namespace {
 using Clock = std::chrono::steady_clock;
 // A selection using this much of its landmark byte budget counts as cut by it.
 constexpr double kBudgetBoundFill = 0.95;
+// Wire bytes of one keypoint without a landmark: u, v, depth, octave, descriptor
+// (zstd takes a little off; the encoded size decides where there is one).
+constexpr double kKeypointBytes = 4 + 4 + 4 + 1 + 32;
+// Keypoints without a landmark use at most half of S with the rest of the
+// window: the other half is slack for losses and resends.
+constexpr double kMaxFill = 0.5;
 double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
 }  // namespace
+
+bool usesTightSelector(const DistillParams& params) {
+  return params.coordinator && params.strategy != "none" && params.tight_strategy != "same" &&
+         params.tight_strategy != params.strategy;
+}
 
 bool inTrouble(const Submap& window, const TrackingHealth& health, const DistillParams& params) {
   if (!params.trouble_aware) return false;
@@ -36,6 +47,11 @@ Distiller::Distiller(const DistillParams& params, EncodedSizeFn size_fn)
   auto sel = makeLandmarkSelector(params.strategy, params);
   HERMES_CHECK(sel.ok(), sel.error());
   selector_ = std::move(sel.value());
+  if (usesTightSelector(params)) {
+    auto tight = makeLandmarkSelector(params.tight_strategy, params);
+    HERMES_CHECK(tight.ok(), tight.error());
+    tight_selector_ = std::move(tight.value());
+  }
 }
 
 Distiller::~Distiller() = default;
@@ -46,6 +62,10 @@ Expected<std::unique_ptr<Distiller>> Distiller::create(const DistillParams& para
   if (!v) return Error{v.error()};
   auto sel = makeLandmarkSelector(params.strategy, params);
   if (!sel) return Error{sel.error()};
+  if (usesTightSelector(params)) {
+    auto tight = makeLandmarkSelector(params.tight_strategy, params);
+    if (!tight) return Error{"distill.tight_strategy: " + tight.error()};
+  }
   return Expected<std::unique_ptr<Distiller>>(std::make_unique<Distiller>(params, std::move(size_fn)));
 }
 
@@ -76,18 +96,18 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   // A window in trouble keeps more keyframes and plans with more of the link
   // (DistillParams::trouble_*); raw streaming keeps everything anyway.
   rep.trouble = params_.strategy != "none" && inTrouble(window, hint.health, params_);
-  DistillParams troubled = params_;
+  DistillParams window_params = params_;
   // A fast window keeps more keyframes, from the budget's surplus only (planDistillation).
   const int motion_cap = budgeted ? motionKeyframeCap(window, params_) : 0;
   CoordinatorInput link = input;
   if (rep.trouble) {
-    troubled.max_keyframes = params_.trouble_max_keyframes;
+    window_params.max_keyframes = params_.trouble_max_keyframes;
     link.bandwidth_Bps *= params_.trouble_budget_gain;  // the backlog still counts in full
   }
   // Not in the global map yet: more keyframes (places for a loop), same budget.
   rep.unplaced = params_.strategy != "none" && params_.unplaced_aware && !input.placed;
-  if (rep.unplaced) troubled.max_keyframes = params_.trouble_max_keyframes;
-  const DistillParams& prm = troubled;
+  if (rep.unplaced) window_params.max_keyframes = params_.trouble_max_keyframes;
+  const DistillParams& prm = window_params;
   rep.budget_bytes = prm.coordinator ? budgetBytes(prm, link)
                                      : std::numeric_limits<double>::infinity();
   auto measure = [&](const Submap& s) {
@@ -179,6 +199,10 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   Submap fit;
   std::vector<int> fit_selected;
   DistillReport fit_report;
+  // The landmarks are all a measured link gets from this window: it has a backlog,
+  // or the plan fills more than the share loop keypoints may top up (kMaxFill).
+  const bool link_binds = !input.link_unmeasured &&
+                          (!input.link_keeps_up || rep.bytes_planned > kMaxFill * rep.budget_bytes);
   for (int round = 1; round <= prm.max_rounds; ++round) {
     rep.rounds = round;
     rep.k = k;
@@ -190,7 +214,9 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
     // The previous round's selection is a feasible start when K grew (same
     // landmark budget); after a shrink it no longer fits and the MILP ignores it.
     prob.warm_start = last_selected;
-    const SelectionResult sel = selector_->select(prob);
+    // Where the link binds the tight strategy selects (DistillParams::tight_strategy).
+    const bool tight = tight_selector_ && budgeted && (k < prm.k_max || link_binds);
+    const SelectionResult sel = (tight ? tight_selector_ : selector_)->select(prob);
     rep.time_select_ms += msSince(t0);
     rep.selection_status = toString(sel.status);
     rep.objective = sel.objective;
@@ -289,12 +315,6 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
 }
 
 namespace {
-// Wire bytes of one keypoint without a landmark: u, v, depth, octave, descriptor
-// (zstd takes a little off; the encoded size decides where there is one).
-constexpr double kKeypointBytes = 4 + 4 + 4 + 1 + 32;
-// Keypoints without a landmark use at most half of S with the rest of the
-// window: the other half is slack for losses and resends.
-constexpr double kMaxFill = 0.5;
 
 std::size_t keypointCount(const Submap& s) {
   std::size_t n = 0;

@@ -33,6 +33,8 @@ Status DistillParams::read(const Config& c) {
   const std::string p = kPrefix;
   Status s = c.getChoice(p + "strategy", {"milp", "greedy_logdet", "stability", "anms", "none"},
                          &strategy);
+  if (s) s = c.getChoice(p + "tight_strategy", {"same", "milp", "greedy_logdet", "stability", "anms"},
+                         &tight_strategy);
 #define HERMES_READ(name, var)             \
   if (s) s = c.get(p + name, &var);
 #define HERMES_READ_BOOL(name, var)        \
@@ -136,6 +138,7 @@ Status DistillParams::validate() const {
 void DistillParams::write(ConfigWriter* out) const {
   const std::string p = kPrefix;
   out->set(p + "strategy", strategy);
+  out->set(p + "tight_strategy", tight_strategy);
   out->set(p + "coordinator", std::string(coordinator ? "on" : "off"));
   out->set(p + "fixed_k", fixed_k);
   out->set(p + "eta", eta);

@@ -89,6 +89,7 @@ TEST(Coordinator, LearntKeptRatiosHitTheBudgetInOneRound) {
   // learnt ratios the first round came in low and K was raised for a second solve.
   DistillParams p;
   p.k_max = 400;  // the budget, not k_max, bounds K here
+  p.tight_strategy = "same";  // the MILP's ratios (ANMS keeps other ones)
   Distiller d(p, referenceEncodedSize);
   std::vector<int> rounds;
   for (double t : {20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0}) {
@@ -130,6 +131,7 @@ TEST(Coordinator, ShrinksToFitTheBudget) {
   const double raw = static_cast<double>(referenceEncodedSize(w.submap));
   DistillParams p;
   p.milp_time_limit_s = 0.5;
+  p.tight_strategy = "same";  // the MILP also where the budget binds
   Distiller d(p, referenceEncodedSize);
   for (double fraction : {0.5, 0.25, 0.12}) {
     CoordinatorInput in;
@@ -178,6 +180,7 @@ TEST(Coordinator, ReselectsWhenTheByteModelUnderestimates) {
 TEST(Coordinator, RepairsWhenTheRoundsRunOut) {
   const SyntheticWindow w = testing::window("MH_01_easy", 140.0);
   DistillParams p;
+  p.tight_strategy = "same";  // ANMS fills the modelled budget: it would hit the floor K
   p.max_rounds = 1;
   p.bytes_obs = 30;  // real: ~65 B per observation, so the single round overshoots
   p.bytes_lm = 30;
@@ -273,6 +276,7 @@ TEST(Coordinator, AFastWindowKeepsKeyframesForItsMotionFromTheSurplusOnly) {
   const Expected<SyntheticWindow> w = fastWindow();
   ASSERT_TRUE(w.ok()) << w.error();
   DistillParams p;
+  p.tight_strategy = "same";  // the plans of one selector
   p.motion_keyframe_spacing = windowMotion(w->submap, p) / 20;  // room for 20 keyframes
   ASSERT_EQ(motionKeyframeCap(w->submap, p), 20);
   DistillParams off = p;
@@ -360,6 +364,7 @@ TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
 TEST(Coordinator, SpareBudgetCarriesLoopKeypointsOnlyOnALinkThatKeepsUp) {
   const SyntheticWindow w = testing::window("V1_01_easy", 100.0);
   DistillParams p;
+  p.tight_strategy = "same";  // the same landmarks with and without the keypoints
   p.loop_keypoints = 50;
   CoordinatorInput in;
   in.bandwidth_Bps = 20 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);  // ample
@@ -500,6 +505,79 @@ TEST(Coordinator, EveryStrategyFitsTheBudgetEndToEnd) {
   }
 }
 
+TEST(Coordinator, WhereTheLinkBindsTheTightStrategySelects) {
+  const SyntheticWindow w = testing::window("MH_01_easy", 50.0);
+  const double raw = static_cast<double>(referenceEncodedSize(w.submap));
+  DistillParams milp;
+  milp.tight_strategy = "same";
+  DistillParams hybrid;  // default: ANMS where K < k_max
+  ASSERT_EQ(hybrid.strategy, "milp");
+  ASSERT_EQ(hybrid.tight_strategy, "anms");
+  DistillParams anms;
+  anms.strategy = "anms";
+  CoordinatorInput tight, ample;
+  tight.bandwidth_Bps = 0.15 * raw / (milp.eta * milp.window_s);
+  ample.bandwidth_Bps = 20 * raw / (milp.eta * milp.window_s);
+  auto run = [&](const DistillParams& p, const CoordinatorInput& in) {
+    DistillResult r = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
+    EXPECT_TRUE(r.report.ok) << r.report.error;
+    EXPECT_FALSE(r.report.deferred) << r.report.defer_reason;
+    return r;
+  };
+  // A tight link: K stays below k_max and the hybrid selects as ANMS does.
+  tight.link_keeps_up = true;  // K < k_max alone decides
+  const DistillResult h_tight = run(hybrid, tight);
+  const DistillResult a_tight = run(anms, tight);
+  const DistillResult m_tight = run(milp, tight);
+  ASSERT_LT(h_tight.report.k, hybrid.k_max);
+  EXPECT_EQ(h_tight.report.selection_status, "heuristic");
+  EXPECT_NE(m_tight.report.selection_status, "heuristic");
+  EXPECT_EQ(h_tight.report.k, a_tight.report.k);
+  EXPECT_EQ(h_tight.submap.landmarks.size(), a_tight.submap.landmarks.size());
+  EXPECT_LE(static_cast<double>(h_tight.report.bytes_actual), h_tight.report.budget_bytes);
+  // The MILP covers several keyframes' K with one long-tracked landmark (more
+  // observations per landmark); ANMS takes each keyframe's best spread ones.
+  EXPECT_LT(static_cast<double>(h_tight.submap.observationCount()) / h_tight.submap.landmarks.size(),
+            static_cast<double>(m_tight.submap.observationCount()) / m_tight.submap.landmarks.size());
+  // Room for K = k_max on a link that keeps up (loop keypoints go too): the MILP
+  // selects, the same as without the tight strategy; so does an unmeasured link.
+  ample.link_keeps_up = true;
+  const DistillResult h_ample = run(hybrid, ample);
+  const DistillResult m_ample = run(milp, ample);
+  EXPECT_EQ(h_ample.report.k, hybrid.k_max);
+  EXPECT_NE(h_ample.report.selection_status, "heuristic");
+  EXPECT_EQ(h_ample.submap.landmarks.size(), m_ample.submap.landmarks.size());
+  EXPECT_EQ(h_ample.report.bytes_actual, m_ample.report.bytes_actual);
+  ample.link_keeps_up = false;
+  ample.link_unmeasured = true;
+  const DistillResult h_unmeasured = run(hybrid, ample);
+  EXPECT_NE(h_unmeasured.report.selection_status, "heuristic");
+  // A link that keeps up but whose plan fills more than half the budget: no loop
+  // keypoint fits beside the landmarks, and the tight strategy selects them.
+  CoordinatorInput half = ample;
+  half.link_unmeasured = false;
+  half.link_keeps_up = true;
+  half.bandwidth_Bps = 1.3 * static_cast<double>(h_unmeasured.report.bytes_actual) /
+                       (milp.eta * milp.window_s);
+  const DistillResult h_half = run(hybrid, half);
+  EXPECT_EQ(h_half.report.selection_status, "heuristic");
+  EXPECT_EQ(h_half.report.loop_keypoints, 0);
+  EXPECT_LE(static_cast<double>(h_half.report.bytes_actual), h_half.report.budget_bytes);
+  EXPECT_NE(run(milp, half).report.selection_status, "heuristic");
+  // K = k_max but a backlog on the measured link: the landmarks are all the
+  // window sends, and the tight strategy selects them.
+  ample.link_unmeasured = false;
+  const DistillResult h_backlog = run(hybrid, ample);
+  EXPECT_EQ(h_backlog.report.k, hybrid.k_max);
+  EXPECT_EQ(h_backlog.report.selection_status, "heuristic");
+  EXPECT_EQ(h_backlog.report.loop_keypoints, 0);
+  // Coordinator off (fixed K below k_max): the main strategy, never the tight one.
+  DistillParams fixed = hybrid;
+  fixed.coordinator = false;
+  EXPECT_FALSE(usesTightSelector(fixed));
+  EXPECT_NE(run(fixed, ample).report.selection_status, "heuristic");
+}
+
 TEST(Coordinator, MalformedWindowIsAnErrorNotACrash) {
   SyntheticWindow w = testing::window("MH_01_easy", 10.0);
   w.submap.landmarks[0].observations.push_back({987654321, 0});
@@ -561,8 +639,12 @@ TEST(Params, ReadsTheDistillSection) {
   ASSERT_TRUE(cfg->applyOverride("distill.coordinator=on"));
   ASSERT_TRUE(p.read(*cfg));
   EXPECT_TRUE(p.coordinator);
+  EXPECT_EQ(p.tight_strategy, "anms");
+  ASSERT_TRUE(cfg->applyOverride("distill.tight_strategy=same"));
+  ASSERT_TRUE(p.read(*cfg));
+  EXPECT_EQ(p.tight_strategy, "same");
   for (const char* bad : {"distill.strategy=gurobi", "distill.coordinator=maybe", "distill.eta=3",
-                          "distill.fixed_k=0"}) {
+                          "distill.fixed_k=0", "distill.tight_strategy=none"}) {
     auto c = Config::fromString("distill:\n  strategy: milp\n", "bad.yaml");
     ASSERT_TRUE(c->applyOverride(bad));
     DistillParams q;

@@ -9,8 +9,10 @@
 //   covisibility  hermes with covisibility keyframes instead of entropy (Fig. 14)
 //   false_candidates  hermes with 20 % of place-recognition candidates replaced by
 //                 random keyframes of other agents: PCM must keep every false loop out
-//   md_a, md_b    hermes with the paper's landmark scores MD_A (stability) and MD_B
-//                 (spatial ANMS) instead of the MILP (landmark-scoring ablation)
+//   md, md_a, md_b  hermes with one landmark selection at every K: the paper's MD
+//                 (the MILP, also where the link binds), MD_A (stability) or MD_B
+//                 (spatial ANMS) (landmark-scoring ablation; hermes itself uses the
+//                 MILP at K = k_max and ANMS where the budget holds K lower)
 // --full mh|v1: the whole-sequence table (bench_system_full.cc): five (three) robots
 // over their whole sequences, each run kept in its own folder, resumable.
 // Prints a table on stderr and JSON on stdout (or --json FILE).
@@ -56,8 +58,8 @@ const char* kUsage =
     "  --cache DIR      rendered data cache (default data_cache/bench_system)\n"
     "  --bandwidths L   shared link rates in Mbit/s, 0 = unlimited (default 0,30,10,5,1,0.5)\n"
     "  --variants L     hermes,fixed_k100,raw,csa_off,covisibility,false_candidates,\n"
-    "                   md_a,md_b (default: the first six; csa_off, covisibility,\n"
-    "                   md_a, md_b only at the two lowest bandwidths, false_candidates\n"
+    "                   md,md_a,md_b (default: the first six; csa_off, covisibility,\n"
+    "                   md, md_a, md_b only at the two lowest bandwidths, false_candidates\n"
     "                   only unlimited)\n"
     "  --set KEY=VALUE  configuration override for every run (repeatable; e.g.\n"
     "                   distill.k_max=300); the variant's own settings win\n"
@@ -75,7 +77,7 @@ const char* kUsage =
     "                   MH_01-05 in one hall (data_cache/mh_full); v1: three over whole\n"
     "                   V1_01-03 (data_cache/v1_full); rendered from ../shared/data/euroc_gt\n"
     "                   (else config/trajectories) when missing. Bandwidths default to 0,10,2,0.5, variants to\n"
-    "                   hermes,raw,fixed_k100 (ablations: csa_off, covisibility, md_a, md_b\n"
+    "                   hermes,raw,fixed_k100 (ablations: csa_off, covisibility, md, md_a, md_b\n"
     "                   run at every bandwidth given). Each run is kept in --out\n"
     "                   (default results/bench_full_SET/<variant>_<Mbit/s>/: metrics,\n"
     "                   trajectories, CSVs, bench_row.json); a run with a row there is\n"
@@ -115,8 +117,9 @@ std::vector<std::string> variantSets(const std::string& v) {
   if (v == "csa_off") return {"server.csa=off"};
   if (v == "covisibility") return {"keyframe.policy=covisibility"};
   if (v == "false_candidates") return {};
-  if (v == "md_a") return {"distill.strategy=stability"};
-  if (v == "md_b") return {"distill.strategy=anms"};
+  if (v == "md") return {"distill.tight_strategy=same"};
+  if (v == "md_a") return {"distill.strategy=stability", "distill.tight_strategy=same"};
+  if (v == "md_b") return {"distill.strategy=anms", "distill.tight_strategy=same"};
   return {"?"};
 }
 
@@ -620,7 +623,7 @@ int main(int argc, char** argv) {
   std::fprintf(stderr, "%-13s %9s %7s %10s %9s %9s %7s %8s\n", "variant", "Mbit/s", "merged",
                "ATE [cm]", "kB", "kB/s", "loops", "wall [s]");
   for (const std::string& v : variants) {
-    const bool ablation = v == "csa_off" || v == "covisibility" || v == "md_a" || v == "md_b";  // low bandwidths only
+    const bool ablation = v == "csa_off" || v == "covisibility" || v == "md" || v == "md_a" || v == "md_b";  // low bandwidths only
     for (const std::string& bw : bandwidths) {
       if (ablation && std::find(low.begin(), low.end(), bw) == low.end()) continue;
       if (v == "false_candidates" && std::atof(bw.c_str()) > 0) continue;

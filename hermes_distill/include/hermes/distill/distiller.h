@@ -80,6 +80,11 @@ struct DistillResult {
 /// params.trouble_weak_frames frames. Always false with trouble_aware off.
 bool inTrouble(const Submap& window, const TrackingHealth& health, const DistillParams& params);
 
+/// Whether the distiller has a second selector for where the link binds
+/// (params.tight_strategy): coordinator on, not raw streaming, and a tight
+/// strategy other than the main one.
+bool usesTightSelector(const DistillParams& params);
+
 class Distiller {
  public:
   /// size_fn may be empty: the byte model's prediction is used instead.
@@ -121,6 +126,7 @@ class Distiller {
   DistillParams params_;
   EncodedSizeFn size_fn_;
   std::unique_ptr<LandmarkSelector> selector_;
+  std::unique_ptr<LandmarkSelector> tight_selector_;  ///< where the link binds (null: selector_)
   ByteModel model_;
   KeptModel kept_;
 };

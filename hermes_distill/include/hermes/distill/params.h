@@ -4,6 +4,11 @@
 //   distill.strategy          milp | greedy_logdet | stability | anms | none
 //                             (none = raw streaming: every keyframe and landmark of
 //                             the window, no trimming, no budget)
+//   distill.tight_strategy    selection where the link binds: the budget holds K below
+//                             k_max, or the landmarks are all a measured link gets from
+//                             the window (a backlog, or the plan leaves no room for loop
+//                             keypoints): milp | greedy_logdet | stability | anms | same
+//                             (= distill.strategy); coordinator on only
 //   distill.coordinator       on | off  (a YAML bool true/false is accepted as well);
 //                             off = fixed K (distill.fixed_k), all keyframes up to
 //                             distill.max_keyframes, no byte budget
@@ -66,6 +71,7 @@ namespace distill {
 
 struct DistillParams {
   std::string strategy = "milp";
+  std::string tight_strategy = "anms";
   bool coordinator = true;
   int fixed_k = 60;
 
@@ -97,8 +103,8 @@ struct DistillParams {
   double epsilon = 0.05;
   double lambda_support = 2.0;
   double lambda_grid = 1.5;
-  int grid_cols = 6;
-  int grid_rows = 4;
+  int grid_cols = 12;  // 6 x 4 -> 12 x 8: README "Seventeenth pass"
+  int grid_rows = 8;
   double milp_time_limit_s = 0.1;
   double milp_rel_gap = 1e-3;
   bool milp_warm_start = true;
