@@ -35,6 +35,16 @@ bool usesTightSelector(const DistillParams& params) {
          params.tight_strategy != params.strategy;
 }
 
+namespace {
+// The selector for where the link binds; null when the distiller needs none.
+Expected<std::unique_ptr<LandmarkSelector>> makeTightSelector(const DistillParams& params) {
+  if (!usesTightSelector(params)) return Expected<std::unique_ptr<LandmarkSelector>>(nullptr);
+  auto tight = makeLandmarkSelector(params.tight_strategy, params);
+  if (!tight) return Error{"distill.tight_strategy: " + tight.error()};
+  return tight;
+}
+}  // namespace
+
 bool inTrouble(const Submap& window, const TrackingHealth& health, const DistillParams& params) {
   if (!params.trouble_aware) return false;
   if (health.lost > 0 || health.weak >= params.trouble_weak_frames) return true;
@@ -47,11 +57,9 @@ Distiller::Distiller(const DistillParams& params, EncodedSizeFn size_fn)
   auto sel = makeLandmarkSelector(params.strategy, params);
   HERMES_CHECK(sel.ok(), sel.error());
   selector_ = std::move(sel.value());
-  if (usesTightSelector(params)) {
-    auto tight = makeLandmarkSelector(params.tight_strategy, params);
-    HERMES_CHECK(tight.ok(), tight.error());
-    tight_selector_ = std::move(tight.value());
-  }
+  auto tight = makeTightSelector(params);
+  HERMES_CHECK(tight.ok(), tight.error());
+  tight_selector_ = std::move(tight.value());
 }
 
 Distiller::~Distiller() = default;
@@ -62,10 +70,7 @@ Expected<std::unique_ptr<Distiller>> Distiller::create(const DistillParams& para
   if (!v) return Error{v.error()};
   auto sel = makeLandmarkSelector(params.strategy, params);
   if (!sel) return Error{sel.error()};
-  if (usesTightSelector(params)) {
-    auto tight = makeLandmarkSelector(params.tight_strategy, params);
-    if (!tight) return Error{"distill.tight_strategy: " + tight.error()};
-  }
+  if (auto tight = makeTightSelector(params); !tight) return Error{tight.error()};
   return Expected<std::unique_ptr<Distiller>>(std::make_unique<Distiller>(params, std::move(size_fn)));
 }
 
