@@ -5,14 +5,29 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <thread>
+
+#include <unistd.h>
 
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/server/server_outputs.h"
 #include "hermes/system/tracking_record.h"
 
 namespace hermes::system {
+namespace {
+
+/// Resident memory of this process [B] (/proc/self/statm; 0 where it is absent).
+std::size_t residentBytes() {
+  std::ifstream f("/proc/self/statm");
+  std::size_t pages = 0, resident = 0;
+  if (!(f >> pages >> resident)) return 0;
+  return resident * static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+}
+
+}  // namespace
+
 namespace fs = std::filesystem;
 
 OfflineRun::OfflineRun(SystemParams params, std::unique_ptr<server::Server> server)
@@ -59,12 +74,24 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     OfflineAgent a;
     a.name = src.name;
     a.frames = src.max_frames > 0 ? std::min(src.max_frames, info.frame_count) : info.frame_count;
-    if (trackingMode(params, src.name, *src.dataset, a.frames) != TrackingMode::kReplay) {
+    if (!src.sorties.empty()) {
+      if (src.sorties[0].first_frame != 0) return Error{"agent " + src.name + ": its first sortie must start at frame 0"};
+      for (std::size_t k = 1; k < src.sorties.size(); ++k)
+        if (src.sorties[k].first_frame <= src.sorties[k - 1].first_frame || src.sorties[k].first_frame >= a.frames)
+          return Error{"agent " + src.name + ": sortie " + std::to_string(k) + " starts at frame " +
+                       std::to_string(src.sorties[k].first_frame) + ", not after the one before and before frame " +
+                       std::to_string(a.frames)};
+      a.sorties = std::move(src.sorties);
+    }
+    if (src.clock_origin) {
+      a.clock_offset = *src.clock_origin;
+    } else if (!a.sorties.empty() ||
+               trackingMode(params, src.name, *src.dataset, a.frames) == TrackingMode::kReplay) {
+      a.clock_offset = src.dataset->frameTime(0);  // the stamp frame 0 carries; no image
+    } else {
       auto first = loadCameraFrame(*src.dataset, 0);
       if (!first.ok()) return Error{"agent " + src.name + ": frame 0: " + first.error()};
       a.clock_offset = first->stamp;
-    } else {
-      a.clock_offset = src.dataset->frameTime(0);  // the stamp frame 0 carries; no image
     }
     a.dataset = std::move(src.dataset);
     run->agents_.push_back(std::move(a));
@@ -72,10 +99,13 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
     if (!pipeline) return Error{pipeline.error()};
     run->agents_[i].pipeline = std::move(*pipeline);
     const OfflineAgent& made = run->agents_[i];
-    if (Status s = setUpTrackingRecord(run->params_, made.name, *made.dataset, made.frames,
-                                       made.pipeline.get());
-        !s)
+    if (!made.sorties.empty()) {
+      if (Status s = run->setUpSortie(i, 0); !s) return Error{s.error()};
+    } else if (Status s = setUpTrackingRecord(run->params_, made.name, *made.dataset, made.frames,
+                                              made.pipeline.get());
+               !s) {
       return Error{s.error()};
+    }
   }
   if (Status s = run->checkResets(); !s) return Error{s.error()};
   if (params.corrupt.active() &&
@@ -137,22 +167,63 @@ Status OfflineRun::resetAgents(double t) {
         std::find_if(agents_.begin(), agents_.end(),
                      [&](const OfflineAgent& a) { return a.name == reset.agent; }) -
         agents_.begin());
-    OfflineAgent& a = agents_[i];
-    AgentResetRecord r;
-    r.at_s = t;
-    r.frame = a.next;
-    r.old_session = a.pipeline->session();
-    r.bytes_sent_before = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
-    r.submaps_sent_before = a.pipeline->submapsSent();
-    a.pipeline.reset();  // a crash: the open window and the map are gone, the spool stays
-    auto pipeline = makePipeline(i, /*fresh=*/false);
-    if (!pipeline) return Error{"agent " + a.name + " reset at " + std::to_string(t) + " s: " + pipeline.error()};
-    a.pipeline = std::move(*pipeline);
-    r.new_session = a.pipeline->session();
-    for (const auto& [session, seq] : a.pipeline->uplink()->buffer().pendingKeys())
-      r.spool_carried += session < r.new_session;
-    a.resets.push_back(r);
+    if (Status s = replacePipeline(i, t, /*takeoff=*/false); !s) return s;
   }
+  return Status::Ok();
+}
+
+Status OfflineRun::replacePipeline(std::size_t i, double t, bool takeoff) {
+  OfflineAgent& a = agents_[i];
+  AgentResetRecord r;
+  r.at_s = t;
+  r.frame = a.next;
+  r.takeoff = takeoff;
+  r.old_session = a.pipeline->session();
+  r.bytes_sent_before = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
+  r.submaps_sent_before = a.pipeline->submapsSent();
+  if (takeoff && a.pipeline->hasCarriedWindow()) ++a.windows_lost_landed;
+  a.pipeline.reset();  // a crash: the open window and the map are gone, the spool stays
+  auto pipeline = makePipeline(i, /*fresh=*/false);
+  const std::string what = "agent " + a.name + (takeoff ? " take-off" : " reset") + " at " + std::to_string(t) + " s: ";
+  if (!pipeline) return Error{what + pipeline.error()};
+  a.pipeline = std::move(*pipeline);
+  if (takeoff)
+    if (Status s = setUpSortie(i, a.sortie); !s) return Error{what + s.error()};
+  r.new_session = a.pipeline->session();
+  for (const auto& [session, seq] : a.pipeline->uplink()->buffer().pendingKeys())
+    r.spool_carried += session < r.new_session;
+  a.resets.push_back(r);
+  return Status::Ok();
+}
+
+std::size_t OfflineRun::sortieEnd(const OfflineAgent& a) {
+  return a.sortie + 1 < a.sorties.size() ? a.sorties[a.sortie + 1].first_frame : a.frames;
+}
+
+Status OfflineRun::setUpSortie(std::size_t i, std::size_t s) {
+  const OfflineAgent& a = agents_[i];
+  const Sortie& sortie = a.sorties[s];
+  if (sortie.replay_path.empty()) return Status::Ok();
+  const std::string what = "agent " + a.name + " sortie " + std::to_string(s) + ": ";
+  auto log = agent::readTrackingLog(sortie.replay_path);
+  if (!log) return Error{what + log.error()};
+  if (Status k = log->key.matches(sortie.replay_key); !k)
+    return Error{what + sortie.replay_path + ": " + k.error()};
+  shiftTrackingLog(&*log, sortie.replay_shift_s);
+  // The frames' stamps as the dataset carries them (the shift rounds them).
+  std::size_t f = sortie.first_frame;
+  const std::size_t end = s + 1 < a.sorties.size() ? a.sorties[s + 1].first_frame : a.frames;
+  for (agent::TrackingStep& step : log->steps) {
+    if (step.flush) continue;
+    if (f >= end) return Error{what + sortie.replay_path + " holds more frames than the sortie (" +
+                               std::to_string(end - sortie.first_frame) + ")"};
+    const double stamp = a.dataset->frameTime(f++);
+    if (std::abs(stamp - step.stamp) > 1e-4)
+      return Error{what + sortie.replay_path + ": frame " + std::to_string(f - 1) + " is at " +
+                   std::to_string(stamp) + " s, the shifted recording at " + std::to_string(step.stamp) + " s"};
+    step.stamp = stamp;
+  }
+  if (Status r = a.pipeline->replayTracking(std::move(*log)); !r) return Error{what + r.error()};
   return Status::Ok();
 }
 
@@ -280,6 +351,11 @@ Status OfflineRun::feedAgent(std::size_t i, double t) {
   while (a.next < a.frames) {
     const double ts = a.dataset->frameTime(a.next) - a.clock_offset;
     if (ts > t) break;
+    if (a.landed) {  // the next sortie takes off: a new session with a fresh map
+      ++a.sortie;
+      a.landed = false;
+      if (Status s = replacePipeline(i, ts, /*takeoff=*/true); !s) return s;
+    }
     a.feeding_stamp = ts;
     const std::string what = "agent " + a.name + ": frame " + std::to_string(a.next) + ": ";
     double stamp = 0;
@@ -296,10 +372,11 @@ Status OfflineRun::feedAgent(std::size_t i, double t) {
     if (!odo.empty() && odo.back().t == stamp)
       if (const auto T_W_B = a.pipeline->globalPose().inWorld(odo.back().T_W_B))
         a.global_track.push_back({stamp, *T_W_B});
-    if (++a.next == a.frames) {
+    if (++a.next == sortieEnd(a)) {  // the end of the data or a landing
       a.pipeline->flushWindow();  // the last, partial window
       if (Status s = a.pipeline->finishTracking(); !s) return s;  // recording / replay
       a.next_retry = t + params_.run.agent.tracker.window.period_s;
+      a.landed = a.next < a.frames;
     }
   }
   return Status::Ok();
@@ -348,10 +425,10 @@ Status OfflineRun::feedDueFrames(double t) {
 }
 
 void OfflineRun::retryCarriedWindows(double t) {
-  // After its last frame an agent makes no new windows; one it had to defer
+  // After its last frame (or a landing) an agent makes no new windows; one it had to defer
   // (the link too slow or busy) is tried again every window period.
   for (OfflineAgent& a : agents_) {
-    if (a.next < a.frames || !a.pipeline->hasCarriedWindow() || t + 1e-9 < a.next_retry) continue;
+    if ((a.next < a.frames && !a.landed) || !a.pipeline->hasCarriedWindow() || t + 1e-9 < a.next_retry) continue;
     a.pipeline->retryCarriedWindow(t);
     a.next_retry = t + params_.run.agent.tracker.window.period_s;
   }
@@ -391,6 +468,37 @@ Status OfflineRun::restartServer(double t) {
   if (network_) network_->onServerBack();
   next_server_ = t + params_.clock.server_period_s;
   return Status::Ok();
+}
+
+void OfflineRun::sampleHealth(double t) {
+  HealthSample h;
+  h.time_s = t;
+  h.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count();
+  h.rss_bytes = residentBytes();
+  for (const OfflineAgent& a : agents_) h.flying += !a.landed && a.next > 0 && a.next < a.frames;
+  h.server_up = server_ != nullptr;
+  if (server_) {
+    h.state_bytes = server_->saveState().size();
+    h.keyframes = server_->map().keyframeCount();
+    h.landmarks = server_->map().landmarkCount();
+    h.pending = server_->pending();
+    h.merged = server_->counters().merged;
+    h.agents_merged = server_->mapManager().agentsMerged();
+    const TimingStats timings = server_->timings();
+    const std::size_t n = timings.count("submap");
+    if (n < health_submaps_) health_submaps_ = 0;  // a server resumed without its timings
+    const auto it = timings.samples().find("submap");
+    if (it != timings.samples().end()) {
+      const std::vector<double>& v = it->second;
+      const std::size_t fresh = std::min(n - health_submaps_, v.size());
+      const std::vector<double> last(v.end() - static_cast<std::ptrdiff_t>(fresh), v.end());
+      h.submaps = fresh;
+      h.submap_ms_median = timing::percentile(last, 50);
+      h.submap_ms_p95 = timing::percentile(last, 95);
+    }
+    health_submaps_ = n;
+  }
+  health_.push_back(h);
 }
 
 void OfflineRun::sample(double t) {
@@ -437,6 +545,8 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     for (const OfflineAgent& a : agents_) b += a.pipeline->uplink()->buffer().pendingBytes();
     return b + acks_.size() + (network_ ? network_->pendingWork() : 0);
   };
+  wall_start_ = std::chrono::steady_clock::now();
+  next_health_ = 0;
   for (std::int64_t k = 0;; ++k) {
     const double t = double(k) * c.step_s;
     now_ = t;
@@ -455,6 +565,10 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     while (t + 1e-9 >= next_sample_ + c.sample_period_s) {
       sample(t);
       next_sample_ += c.sample_period_s;
+    }
+    if (c.health_period_s > 0 && t + 1e-9 >= next_health_) {
+      sampleHealth(t);
+      next_health_ += c.health_period_s;
     }
     const bool frames_left = std::any_of(agents_.begin(), agents_.end(),
                                          [](const OfflineAgent& a) { return a.next < a.frames; });
@@ -497,7 +611,9 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
   sendGlobalPoses(now_);
   for (const PendingGlobal& g : globals_) agents_[g.agent].pipeline->onGlobalPose(g.update, g.time);
   globals_.clear();
-  return server_->checkpoint(now_);  // clean shutdown (no-op without a checkpoint directory)
+  const Status saved = server_->checkpoint(now_);  // clean shutdown (no-op without a checkpoint directory)
+  if (c.health_period_s > 0) sampleHealth(now_);    // the end state
+  return saved;
 }
 
 }  // namespace hermes::system

@@ -301,6 +301,19 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                            });
       !s)
     return s;
+  if (!run.health().empty())
+    if (Status s = writeFile(out / "health.csv",
+                             [&](std::ostream& o) {
+                               o << "time_s,wall_s,server_up,state_bytes,rss_bytes,keyframes,landmarks,pending,"
+                                    "merged,submaps,submap_ms_median,submap_ms_p95,agents_merged,flying\n";
+                               for (const HealthSample& h : run.health())
+                                 o << h.time_s << ',' << h.wall_s << ',' << h.server_up << ',' << h.state_bytes << ','
+                                   << h.rss_bytes << ',' << h.keyframes << ',' << h.landmarks << ',' << h.pending
+                                   << ',' << h.merged << ',' << h.submaps << ',' << h.submap_ms_median << ','
+                                   << h.submap_ms_p95 << ',' << h.agents_merged << ',' << h.flying << '\n';
+                             });
+        !s)
+      return s;
   // Error over time: every merged pose's error under the run's one common
   // alignment (kind merged), and every odometry pose's error with the agent's
   // odometry aligned on its own (kind odometry).

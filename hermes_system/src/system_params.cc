@@ -95,6 +95,7 @@ Status ClockParams::read(const Config& c) {
   for (Status s : {c.get("system.step_s", &step_s), c.get("system.server_period_s", &server_period_s),
                    c.get("system.sample_period_s", &sample_period_s),
                    c.get("system.drain_s", &drain_s),
+                   c.get("system.health_period_s", &health_period_s),
                    c.get("system.agent_threads", &agent_threads),
                    c.get("system.server_restart_at", &server_restart_at),
                    c.get("system.server_downtime_s", &server_downtime_s),
@@ -110,6 +111,8 @@ Status ClockParams::validate() const {
   if (!(server_period_s >= step_s)) return Error{"system.server_period_s must be >= system.step_s"};
   if (!(sample_period_s >= step_s)) return Error{"system.sample_period_s must be >= system.step_s"};
   if (!(drain_s >= 0) || !std::isfinite(drain_s)) return Error{"system.drain_s must be >= 0"};
+  if (!(health_period_s >= 0) || !std::isfinite(health_period_s))
+    return Error{"system.health_period_s must be >= 0 (0 = no health samples)"};
   if (agent_threads < 1 || agent_threads > 64)
     return Error{"system.agent_threads must be in [1, 64], got " + std::to_string(agent_threads)};
   for (double t : server_restart_at)
@@ -134,6 +137,7 @@ void ClockParams::write(ConfigWriter& w) const {
   w.set("system.server_period_s", server_period_s);
   w.set("system.sample_period_s", sample_period_s);
   w.set("system.drain_s", drain_s);
+  w.set("system.health_period_s", health_period_s);
   w.set("system.agent_threads", agent_threads);
   w.set("system.server_restart_at", server_restart_at);
   w.set("system.server_downtime_s", server_downtime_s);

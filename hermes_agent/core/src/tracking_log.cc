@@ -450,4 +450,14 @@ Expected<TrackingKey> readTrackingKey(const std::string& path) {
   return key;
 }
 
+void shiftTrackingLog(TrackingLog* log, double dt_s) {
+  for (TrackingStep& step : log->steps) {
+    step.stamp += dt_s;
+    if (!step.window) continue;
+    step.window->header.t_start += dt_s;
+    step.window->header.t_end += dt_s;
+    for (Keyframe& kf : step.window->keyframes) kf.stamp += dt_s;
+  }
+}
+
 }  // namespace hermes::agent

@@ -56,14 +56,17 @@
 // (bookkeeper.h); either way it keeps the robot's id.
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
 
 #include "hermes/agent/agent_pipeline.h"
+#include "hermes/agent/tracking_log.h"
 #include "hermes/core/bandwidth_log.h"
 #include "hermes/core/dataset.h"
 #include "hermes/core/emulated_link.h"
@@ -72,16 +75,42 @@
 
 namespace hermes::system {
 
+/// A take-off of a robot that flies several sorties (a mission, mission.h): from
+/// dataset frame `first_frame` on it flies a new session with a fresh map; the
+/// sortie before it landed at the frame before (its last window flushed, its
+/// spool kept).
+struct Sortie {
+  std::size_t first_frame = 0;
+  /// Replay (tracking_record.h): this sortie's tracking is the recording at
+  /// `replay_path`, which must carry `replay_key` (the sequence the sortie
+  /// flies), its stamps moved by `replay_shift_s` onto the dataset's; empty
+  /// path: tracked live from the images.
+  std::string replay_path;
+  agent::TrackingKey replay_key;
+  double replay_shift_s = 0;
+};
+
 struct AgentSource {
+  AgentSource() = default;
+  AgentSource(std::string n, std::unique_ptr<Dataset> d, std::size_t max = 0)
+      : name(std::move(n)), dataset(std::move(d)), max_frames(max) {}
+
   std::string name;                  ///< unique, no commas (CSV)
   std::unique_ptr<Dataset> dataset;
   std::size_t max_frames = 0;        ///< 0 = all
+  /// Several sorties (the first at frame 0), each set up here instead of by
+  /// system.tracking_*_dir; empty: one flight over all frames.
+  std::vector<Sortie> sorties;
+  /// The dataset stamp that is simulated time 0 (empty: frame 0's): robots of
+  /// a mission share one clock and take off when their first frame is due.
+  std::optional<double> clock_origin;
 };
 
 /// One agent reset of the run (system.agent_reset).
 struct AgentResetRecord {
   double at_s = 0;                      ///< [s] simulated time
   std::size_t frame = 0;                ///< the first dataset frame of the new session
+  bool takeoff = false;                 ///< a sortie's take-off after a landing, not a crash
   std::uint32_t old_session = 0, new_session = 0;
   std::size_t spool_carried = 0;        ///< old-session submaps still in the spool, sent on
   std::int64_t bytes_sent_before = 0;   ///< the old pipeline's uplink bytes [B]
@@ -103,7 +132,11 @@ struct OfflineAgent {
   /// Body poses in the world as the robot knew them when it tracked each frame
   /// (its odometry through the server's latest world <- odom; from the first one on).
   Trajectory global_track;
-  std::vector<AgentResetRecord> resets;  ///< its restarts / map resets so far
+  std::vector<AgentResetRecord> resets;  ///< its restarts / map resets / take-offs so far
+  std::vector<Sortie> sorties;           ///< AgentSource::sorties
+  std::size_t sortie = 0;                ///< the sortie flying (or the last one landed)
+  bool landed = false;                   ///< between two sorties
+  std::size_t windows_lost_landed = 0;   ///< deferred windows still held at the next take-off
   /// A submap handed to the transport during a step, put on the link after it.
   struct HeldSend {
     double stamp;  ///< sim time of the frame whose feed sent it
@@ -125,6 +158,22 @@ struct ServerRestart {
   std::size_t frames_lost_down = 0;   ///< frames that arrived while there was no server
   std::size_t resends_before = 0;     ///< agents' resends up to the destruction
   double first_accept_s = -1;         ///< [s] simulated time of the first new submap accepted after it
+};
+
+/// The server's health at one moment (system.health_period_s; a soak's plots).
+struct HealthSample {
+  double time_s = 0;               ///< [s] simulated
+  double wall_s = 0;               ///< [s] since the run started
+  std::size_t state_bytes = 0;     ///< Server::saveState() size (what a checkpoint writes) [B]
+  std::size_t rss_bytes = 0;       ///< resident memory of the process (server and agents) [B]
+  std::size_t keyframes = 0, landmarks = 0;  ///< in the global map
+  std::size_t pending = 0;         ///< submaps queued at the server
+  std::size_t merged = 0;          ///< submaps merged so far
+  std::size_t submaps = 0;         ///< submaps the server processed since the last sample
+  double submap_ms_median = 0, submap_ms_p95 = 0;  ///< their server time [ms]
+  int agents_merged = 0;
+  int flying = 0;                  ///< agents between take-off and landing
+  bool server_up = true;
 };
 
 struct ProgressInfo {
@@ -162,6 +211,7 @@ class OfflineRun {
   /// The scenario's network (null without link.scenario).
   const RelayNetwork* network() const { return network_.get(); }
   const std::vector<BandwidthSample>& bandwidth() const { return bandwidth_; }
+  const std::vector<HealthSample>& health() const { return health_; }
   /// Per agent: (sim time, bandwidth estimate [B/s]) at each bandwidth sample.
   const std::map<std::string, std::vector<std::pair<double, double>>>& estimates() const {
     return estimates_;
@@ -197,6 +247,14 @@ class OfflineRun {
   Status checkResets();
   /// Recreates the pipelines of the agents due to reset at t (system.agent_reset).
   Status resetAgents(double t);
+  /// Agent i's pipeline destroyed and made again over its spool (next session),
+  /// as a crash (reset) or after a landing (take-off: the sortie's replay set up).
+  Status replacePipeline(std::size_t i, double t, bool takeoff);
+  /// The frame after agent a's current sortie (its landing), a.frames for the last.
+  static std::size_t sortieEnd(const OfflineAgent& a);
+  /// Sets up sortie s's tracking replay on agent i's pipeline (none: live).
+  Status setUpSortie(std::size_t i, std::size_t s);
+  void sampleHealth(double t);
   /// Agents past their last frame try their deferred window again (one per period).
   void retryCarriedWindows(double t);
 
@@ -231,6 +289,10 @@ class OfflineRun {
   std::vector<PendingAck> acks_;                  ///< sorted by time on use
   std::vector<PendingGlobal> globals_;            ///< in time order
   std::vector<BandwidthSample> bandwidth_;
+  std::vector<HealthSample> health_;
+  double next_health_ = 0;
+  std::size_t health_submaps_ = 0;  ///< the server's submap timings at the last sample
+  std::chrono::steady_clock::time_point wall_start_;
   std::map<std::string, std::vector<std::pair<double, double>>> estimates_;
   std::vector<std::size_t> last_transmitted_;
   std::string base_dir_;

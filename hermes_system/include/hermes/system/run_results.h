@@ -7,6 +7,7 @@
 //   OUT/bandwidth.csv                     time_s,agent,kBps,link_capacity_kBps
 //   OUT/uplink_estimate.csv               time_s,agent,estimate_kBps (the agents' monitors)
 //   OUT/ate_over_time.csv                 time_s,agent,error_m (merged, common alignment)
+//   OUT/health.csv                        the server's health over time (system.health_period_s > 0)
 //   OUT/loops.csv                         accepted loops with their error against ground truth
 //   OUT/pose_graph_edges.csv              the last pose-graph solve, edge by edge
 //   OUT/pose_graph.g2o, pose_graph_nodes.csv   that graph (g2o text) and its nodes'

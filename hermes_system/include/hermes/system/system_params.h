@@ -56,6 +56,9 @@ struct ClockParams {
   double server_period_s = 0.5;  ///< [s] the server merges its queue this often
   double sample_period_s = 1.0;  ///< [s] bandwidth CSV interval
   double drain_s = 60;           ///< [s] after the last frame, time allowed to deliver the rest
+  /// [s] the server's health (memory, queue, time per submap) is sampled this
+  /// often (OfflineRun::health(), health.csv; a soak's plots); 0 = never.
+  double health_period_s = 0;
   /// Agents fed side by side within a clock step (offline_run.h); 1 = one after
   /// another. The results do not depend on it.
   int agent_threads = 2;

@@ -90,6 +90,11 @@ class TrackingLogWriter {
   std::ofstream out_;
 };
 
+/// Moves every stamp of `log` by `dt_s` (steps, their windows' spans and
+/// keyframes): a recording replayed later on a mission's clock (a robot flying
+/// the same sequence again, mission.h). The key is left as recorded.
+void shiftTrackingLog(TrackingLog* log, double dt_s);
+
 /// The whole file's bytes (tests) / file contents decoded. Errors name the file,
 /// the record and the byte offset (truncated, CRC mismatch, bad value).
 Expected<TrackingLog> decodeTrackingLog(const std::vector<std::uint8_t>& bytes,
