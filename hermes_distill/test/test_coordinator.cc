@@ -279,6 +279,7 @@ TEST(Coordinator, AFastWindowKeepsKeyframesForItsMotionFromTheSurplusOnly) {
   ASSERT_TRUE(w.ok()) << w.error();
   DistillParams p;
   p.tight_strategy = "same";  // the plans of one selector
+  p.solver_limits = "work";   // plans compared across runs, also on a loaded machine
   p.motion_keyframe_spacing = windowMotion(w->submap, p) / 20;  // room for 20 keyframes
   ASSERT_EQ(motionKeyframeCap(w->submap, p), 20);
   DistillParams off = p;
@@ -367,6 +368,7 @@ TEST(Coordinator, SpareBudgetCarriesLoopKeypointsOnlyOnALinkThatKeepsUp) {
   const SyntheticWindow w = testing::window("V1_01_easy", 100.0);
   DistillParams p;
   p.tight_strategy = "same";  // the same landmarks with and without the keypoints
+  p.solver_limits = "work";   // ... on a loaded machine too (a wall-clock limit cuts CBC short)
   p.loop_keypoints = 50;
   CoordinatorInput in;
   in.bandwidth_Bps = 20 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);  // ample
@@ -517,6 +519,9 @@ TEST(Coordinator, WhereTheLinkBindsTheTightStrategySelects) {
   ASSERT_EQ(hybrid.tight_strategy, "anms");
   DistillParams anms;
   anms.strategy = "anms";
+  // Selections compared across runs: deterministic limits (a wall-clock limit
+  // cuts CBC short on a loaded machine).
+  for (DistillParams* q : {&milp, &hybrid, &anms}) q->solver_limits = "work";
   CoordinatorInput tight, ample;
   tight.bandwidth_Bps = 0.15 * raw / (milp.eta * milp.window_s);
   ample.bandwidth_Bps = 20 * raw / (milp.eta * milp.window_s);

@@ -63,7 +63,9 @@ const char* kUsage =
     "  --server-restart-at S  the server crash [s] (default 90: the first wave flying;\n"
     "                     < 0: none)\n"
     "  --robot-restart NAME@S  the robot crash (default r03, 40 s into its last sortie;\n"
-    "                     'none': none); that sortie is tracked from the images\n"
+    "                     'none': none); after it that robot tracks a fresh map from the images\n"
+    "  --crash-sortie-live  the crashing robot's sortie tracked from the images from its\n"
+    "                     take-off, not replayed until the crash\n"
     "  --health-period S  server health samples [s] (default 30)\n"
     "  --set key=value    config override (repeatable)\n"
     "  --json FILE        write the summary JSON there instead of stdout\n";
@@ -138,6 +140,7 @@ int main(int argc, char** argv) {
   std::string data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
   std::string tracking_dir, trace, out, json_out, robot_restart;
   double bandwidth = 10, server_restart_at = 90, health_period = 30;
+  bool crash_sortie_live = false;
   std::vector<std::string> overrides;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -175,6 +178,8 @@ int main(int argc, char** argv) {
       server_restart_at = std::atof(next().c_str());
     } else if (a == "--robot-restart") {
       robot_restart = next();
+    } else if (a == "--crash-sortie-live") {
+      crash_sortie_live = true;
     } else if (a == "--health-period") {
       health_period = std::atof(next().c_str());
     } else if (a == "--set") {
@@ -234,18 +239,12 @@ int main(int argc, char** argv) {
   if (!config) return fail(config.error());
   auto params = system::readSystemParams(*config);
   if (!params) return fail(params.error());
-  std::string restart_robot;
-  double restart_at = -1;
-  if (!params->clock.agent_reset.empty()) {
-    restart_robot = params->clock.agent_reset.front().agent;
-    restart_at = params->clock.agent_reset.front().at_s;
-  }
 
   // Each robot's data on the mission clock, its sorties replayed where a recording fits.
   const double epoch = 1.7e9;  // [s] the mission's first stamp (2023-11-14)
   const fs::path views = fs::path(out) / "mission_data";
   std::vector<system::AgentSource> sources;
-  int replayed = 0, live = 0;
+  int replayed = 0, live = 0;  // sorties
   std::vector<std::string> notes;
   for (const system::MissionRobot& r : *robots) {
     auto view = system::writeMissionView((fs::path(data) / r.sequence).string(), r.takeoffs_s, epoch,
@@ -267,9 +266,16 @@ int main(int argc, char** argv) {
     for (std::size_t s = 0; s < r.takeoffs_s.size(); ++s) {
       system::Sortie sortie;
       sortie.first_frame = view->first_frames[s];
+      // A robot crash mid-sortie (system.agent_reset) goes on tracking a fresh
+      // map from the images; the replay holds until then (--crash-sortie-live:
+      // that sortie tracked from the images from its take-off).
       const double end = r.takeoffs_s[s] + (base.frameTime(base.size() - 1) - base.frameTime(0));
-      const bool crashes = r.name == restart_robot && restart_at >= r.takeoffs_s[s] && restart_at <= end;
-      if (fits && !crashes) {  // a crash tracks a fresh map from the images
+      const bool crashes = crash_sortie_live && std::any_of(params->clock.agent_reset.begin(),
+                                                            params->clock.agent_reset.end(), [&](const auto& x) {
+                                                              return x.agent == r.name && x.at_s >= r.takeoffs_s[s] &&
+                                                                     x.at_s <= end;
+                                                            });
+      if (fits && !crashes) {
         sortie.replay_path = rec;
         sortie.replay_key = key;
         sortie.replay_shift_s = view->shifts_s[s];
@@ -341,6 +347,11 @@ int main(int argc, char** argv) {
   for (int w = 0; w < plan.waves; ++w)
     waves.push_back(healthSpan(h, w * wave, w + 1 < plan.waves ? (w + 1) * wave : 1e18));
   j["health_per_wave"] = waves;
+  nlohmann::json slow = nlohmann::json::array();  // what the slowest merges spent their time on
+  for (const server::Server::MergeBreakdown& b : (*run)->server().slowestMerges())
+    slow.push_back({{"t_s", b.now}, {"robot", b.robot}, {"seq", b.seq}, {"keyframes", b.keyframes},
+                    {"loops_attempted", b.loops_attempted}, {"stage_ms", b.stage_ms}});
+  j["server_slowest_merges"] = slow;
   j["health_all"] = healthSpan(h, -1, 1e18);
   const std::string soak_json = (fs::path(out) / "soak.json").string();
   {

@@ -149,6 +149,22 @@ bool Server::takeNext(double now, std::optional<ReceivedSubmap>* next) {
   return true;
 }
 
+namespace {
+
+/// Runs `f`; an exception (a bug: a solver or a container fed a case nobody
+/// foresaw) becomes an error naming `what`, counted as a merge error, and the
+/// server goes on serving every robot instead of dying with the map in memory.
+template <typename F>
+auto guarded(const std::string& what, F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const std::exception& e) {
+    return Error{what + " threw " + e.what()};
+  }
+}
+
+}  // namespace
+
 int Server::process(double now, int max_submaps) {
   int merged = 0, popped = 0;
   // Called while the map manager anchors, which holds the intake lock then.
@@ -163,7 +179,9 @@ int Server::process(double now, int max_submaps) {
     }
     if (!next) continue;
     const ReceivedSubmap& r = *next;
-    auto stats = map_.merge(r.robot, r.submap, credibility);  // without the intake lock
+    auto stats = guarded("merge of robot " + std::to_string(r.robot) + " session " +
+                             std::to_string(r.submap.header.session) + " seq " + std::to_string(r.submap.header.seq),
+                         [&] { return map_.merge(r.robot, r.submap, credibility); });  // without the intake lock
     if (!stats) {
       ++counters_.merge_errors;
       counters_.last_error = stats.error();
@@ -190,7 +208,8 @@ int Server::process(double now, int max_submaps) {
   // waits (closure_budget.h): a submap never waits behind them.
   if (drained && params_.map.closure_budget > 0 && map_.deferredClosures() > 0) {
     MergeStats stats;
-    auto closed = map_.closeDeferred(params_.map.closure_budget, credibility, &stats);
+    auto closed = guarded("deferred loop closures",
+                          [&] { return map_.closeDeferred(params_.map.closure_budget, credibility, &stats); });
     counters_.loops_reverified += static_cast<std::size_t>(stats.loops_reverified);
     if (!closed) {
       ++counters_.merge_errors;
