@@ -62,7 +62,15 @@ std::vector<int> prefilterPairs(const GeneralizedCorrespondences& corr,
     ransac.threshold_ = threshold;
     ransac.max_iterations_ = params.prefilter_max_iterations;
     ransac.probability_ = 0.99;
-    if (!ransac.computeModel()) continue;
+    // OpenGV's 5-point solvers throw on some degenerate samples (Nister's
+    // Sturm bracketing: std::length_error from vector::reserve, seen in the
+    // soak's last wave): a camera pair whose model cannot be computed keeps no
+    // correspondence, as one without a model.
+    try {
+      if (!ransac.computeModel()) continue;
+    } catch (const std::exception&) {
+      continue;
+    }
     if (static_cast<int>(ransac.inliers_.size()) < 5) continue;
     kept.insert(kept.end(), ransac.inliers_.begin(), ransac.inliers_.end());
   }

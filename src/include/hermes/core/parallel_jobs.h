@@ -3,13 +3,16 @@
 // a result array, so results are the same in the same order for any thread
 // count; threads <= 1 runs them in the calling thread, in order (the
 // synchronous mode of deterministic tests). No queue: the jobs are known up
-// front and taken by index.
+// front and taken by index. A job that throws: the threads stop taking jobs,
+// all are joined, and the first exception is rethrown on the caller.
 #pragma once
 
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
+#include <exception>
 #include <functional>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -22,14 +25,23 @@ inline void runParallelJobs(std::size_t n, int threads, const std::function<void
     return;
   }
   std::atomic<std::size_t> next{0};
+  std::exception_ptr failed;  // the first job that threw; the others stop taking jobs
+  std::mutex failed_mu;
   auto work = [&] {
-    for (std::size_t i = next++; i < n; i = next++) job(i);
+    try {
+      for (std::size_t i = next++; i < n; i = next++) job(i);
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(failed_mu);
+      if (!failed) failed = std::current_exception();
+      next = n;
+    }
   };
   std::vector<std::thread> pool;
   pool.reserve(workers - 1);
   for (std::size_t w = 1; w < workers; ++w) pool.emplace_back(work);
   work();
   for (std::thread& t : pool) t.join();
+  if (failed) std::rethrow_exception(failed);  // on the caller, every thread joined
 }
 
 }  // namespace hermes
