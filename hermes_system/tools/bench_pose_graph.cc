@@ -54,6 +54,10 @@ const char* kUsage =
     "            (what-if: how much do the loops' own errors cost?)\n"
     "  --edges FILE   write every edge after the solve: kind,agent_a,stamp_a,agent_b,stamp_b,\n"
     "            residual_m,chi2,weight (weight: robust loss and re-weighting, 1 = fully trusted)\n"
+    "  --incremental-around AGENT:N\n"
+    "            solve incrementally, as a merge does: free the last N nodes of AGENT and\n"
+    "            what server.pose_graph.incremental_hops / incremental_max_free add,\n"
+    "            hold the rest (with --init file: the time a merge's solve takes)\n"
     "  --align-on A[,B...]\n"
     "            take the one common alignment from these agents' nodes only (every\n"
     "            agent is still judged under it): does a robot whose map is off move\n"
@@ -170,6 +174,7 @@ int main(int argc, char** argv) {
   std::string poses_out, edges_out;
   std::vector<std::string> sets;
   std::set<std::string> align_on;
+  std::string around;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&](std::string* out) {
@@ -208,6 +213,8 @@ int main(int argc, char** argv) {
       std::stringstream ls(v);
       for (std::string name; std::getline(ls, name, ',');)
         if (!name.empty()) align_on.insert(name);
+    } else if (a == "--incremental-around") {
+      value(&around);
     } else if (a == "--ground-truth-loops") {
       gt_loops = true;
     } else if (a == "--json") {
@@ -274,6 +281,19 @@ int main(int argc, char** argv) {
 
   Expected<server::PoseGraph> graph = (init == "file" ? *file : chained).build(params);
   if (!graph) return fail(graph.error(), 2);
+  if (!around.empty()) {
+    const auto colon = around.rfind(':');
+    const int n = colon == std::string::npos ? 0 : std::atoi(around.c_str() + colon + 1);
+    const std::string agent = colon == std::string::npos ? "" : around.substr(0, colon);
+    std::vector<KeyframeKey> seeds;
+    for (std::size_t i = 0; i < file->nodes.size(); ++i)
+      if ((*info)[i].agent == agent) seeds.push_back(file->nodes[i].first);
+    if (n <= 0 || seeds.empty()) return fail("--incremental-around needs AGENT:N with a known agent, N > 0", 2);
+    seeds.erase(seeds.begin(), seeds.end() - std::min<std::ptrdiff_t>(n, static_cast<std::ptrdiff_t>(seeds.size())));
+    graph->holdBeyond(seeds, params.incremental_hops, static_cast<std::size_t>(params.incremental_max_free));
+    std::fprintf(stderr, "incremental: %zu of %zu nodes free around the last %zu of %s\n", graph->numFree(),
+                 graph->numNodes(), seeds.size(), agent.c_str());
+  }
   std::fprintf(stderr, "solving %zu nodes, %zu odometry + %zu loop edges ...\n", graph->numNodes(),
                graph->numOdometryEdges(), graph->numLoopEdges());
   Expected<server::PoseGraphResult> r = graph->optimize();
@@ -317,6 +337,7 @@ int main(int argc, char** argv) {
   j["ground_truth_loops"] = gt_loops;
   if (!align_on.empty()) j["align_on"] = std::vector<std::string>(align_on.begin(), align_on.end());
   j["nodes"] = graph->numNodes();
+  j["free_nodes"] = graph->numFree();
   j["odometry_edges"] = graph->numOdometryEdges();
   j["loop_edges"] = graph->numLoopEdges();
   j["solve"] = {{"time_ms", r->time_ms}, {"iterations", r->iterations}, {"converged", r->converged},

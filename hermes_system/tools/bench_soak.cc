@@ -23,6 +23,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench_args.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/mission.h"
@@ -32,6 +33,9 @@
 
 using namespace hermes;
 namespace fs = std::filesystem;
+
+using hermes::system::bench::groundTruthDir;
+using hermes::system::bench::split;
 
 namespace {
 
@@ -69,20 +73,6 @@ const char* kUsage =
     "  --health-period S  server health samples [s] (default 30)\n"
     "  --set key=value    config override (repeatable)\n"
     "  --json FILE        write the summary JSON there instead of stdout\n";
-
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
-std::string groundTruthDir() {
-  const fs::path shared = fs::path(HERMES_SHARED_DATA_DIR) / "euroc_gt";
-  if (fs::is_directory(shared)) return shared.string();
-  return (fs::path(HERMES_SOURCE_DIR) / "config" / "trajectories").string();
-}
 
 /// The default soak link: `rate` Mbit/s, 30 ms, 1 % loss; an outage of 20 s
 /// every 600 s (from 300 s) and 60 s at a fifth of the rate every 900 s (from 450 s).

@@ -35,6 +35,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench_args.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/system/bench_store.h"
 #include "hermes/system/dataset_window.h"
@@ -44,6 +45,9 @@
 
 using namespace hermes;
 namespace fs = std::filesystem;
+
+using hermes::system::bench::groundTruthDir;
+using hermes::system::bench::split;
 
 namespace {
 
@@ -99,14 +103,6 @@ const char* kUsage =
     "                   loops.csv, loop_attempts.csv but for false_candidates, ...) to\n"
     "                   DIR/<variant>_<robots> (--swarm only; --full keeps them in --out)\n"
     "Prints JSON {runs: [...]} on stdout (or to --json FILE) and a table on stderr.\n";
-
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
 
 const char* kSeqs[] = {"MH_01_easy", "MH_02_easy", "MH_03_medium"};
 
@@ -173,15 +169,6 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
   const fs::path data = fs::path(cache) / key;
   if (Status s = hermes::renderCached(req, data.string()); !s) return Error{s.error()};
   return data;
-}
-
-/// Where whole-sequence renders take their trajectories from: the shared data's
-/// EuRoC ground truth, or (a machine without it) the 20-Hz copies shipped in
-/// config/trajectories (the renders sample 20 Hz: the same poses).
-std::string groundTruthDir() {
-  const fs::path shared = fs::path(HERMES_SHARED_DATA_DIR) / "euroc_gt";
-  if (fs::is_directory(shared)) return shared.string();
-  return (fs::path(HERMES_SOURCE_DIR) / "config" / "trajectories").string();
 }
 
 /// Swarm of n robots: robot k flies `duration` s of sequence k mod S from

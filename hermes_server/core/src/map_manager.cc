@@ -33,6 +33,7 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"duplicate_neighbours", &duplicate_neighbours},
                    IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops},
                    IntKey{"closure_budget", &closure_budget},
+                   IntKey{"timing_window", &timing_window},
                    IntKey{"deferred_closures", &deferred_closures},
                    IntKey{"sparse_pair_loops", &sparse_pair_loops}})
     if (config.has(p + k.name))
@@ -65,6 +66,7 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "duplicate_neighbours", duplicate_neighbours);
   out.set(p + "duplicate_min_pair_loops", duplicate_min_pair_loops);
   out.set(p + "closure_budget", closure_budget);
+  out.set(p + "timing_window", timing_window);
   out.set(p + "deferred_closures", deferred_closures);
   out.set(p + "sparse_pair_loops", sparse_pair_loops);
   out.set(p + "sparse_pair_sigma_m", sparse_pair_sigma_m);
@@ -85,6 +87,7 @@ Status MapManagerParams::validate() const {
   if (duplicate_neighbours < 0) return Error{"duplicate_neighbours must be >= 0"};
   if (duplicate_min_pair_loops < 0) return Error{"duplicate_min_pair_loops must be >= 0"};
   if (closure_budget < 0) return Error{"closure_budget must be >= 0 (0 = verify all)"};
+  if (timing_window < 0) return Error{"timing_window must be >= 0 (0 = keep all)"};
   if (deferred_closures < 0) return Error{"deferred_closures must be >= 0"};
   if (sparse_pair_loops < 0) return Error{"sparse_pair_loops must be >= 0 (0 = off)"};
   if (!(sparse_pair_sigma_m > 0) || !std::isfinite(sparse_pair_sigma_m))
@@ -109,7 +112,8 @@ MapManager::MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerP
       bookkeeper_(bookkeeper),
       recognizer_(vocabulary_, params_.place_recognition),
       closer_(params_.loop_closure),
-      sparse_closer_(sparseGate(params_)) {}
+      sparse_closer_(sparseGate(params_)),
+      timings_(static_cast<std::size_t>(params_.timing_window)) {}
 
 Mat6 MapManager::bridgeInformation(const Keyframe& from, const Keyframe& to) const {
   return odometryInformation(from.T_A_C.inverse() * to.T_A_C, -1, to.lost_before, params_.odometry);
@@ -418,10 +422,13 @@ Status MapManager::optimize(bool full) {
   if (!built) return Error{"pose graph: " + built.error()};
   PoseGraph& graph = *built;
   const PoseGraphParams& pg = params_.pose_graph;
+  // Between merges the full solve falls due (fullSolveDue()); a merge then only
+  // solves incrementally.
   const bool incremental = !full && pg.incremental_hops > 0 && graph_diag_.solves > 0 &&
-                           incremental_since_full_ < pg.full_every;
-  if (incremental &&
-      graph.holdBeyond(std::vector<KeyframeKey>(touched_.begin(), touched_.end()), pg.incremental_hops) == 0) {
+                           (pg.full_between_merges || incremental_since_full_ < pg.full_every);
+  if (incremental && graph.holdBeyond(std::vector<KeyframeKey>(touched_.begin(), touched_.end()),
+                                      pg.incremental_hops,
+                                      static_cast<std::size_t>(pg.incremental_max_free)) == 0) {
     touched_.clear();  // nothing in the graph changed
     graph_dirty_ = false;
     merges_since_optimize_ = 0;
@@ -429,18 +436,9 @@ Status MapManager::optimize(bool full) {
   }
   auto t0 = Clock::now();
   auto r = graph.optimize();
-  timings_.add(incremental ? "pose_graph_incremental" : "pose_graph_full", msSince(t0));
-  timings_.add("pose_graph", msSince(t0));
+  const double ms = msSince(t0);
   if (!r) return Error{"pose graph: " + r.error()};
-  graph_diag_.result = *r;
-  graph_diag_.edges = graph.residuals();
-  ++graph_diag_.solves;
-  if (!r->converged) ++graph_diag_.not_converged;
-  graph_diag_.incremental += incremental;
-  graph_diag_.last_incremental = incremental;
-  graph_diag_.last_free_nodes = graph.numFree();
-  graph_diag_.last_nodes = graph.numNodes();
-  incremental_since_full_ = incremental ? incremental_since_full_ + 1 : 0;
+  noteSolve(graph, *r, incremental, ms);
   touched_.clear();
   for (auto& [tid, t] : map_.trajectories) {
     if (!t.anchored) continue;
@@ -451,6 +449,67 @@ Status MapManager::optimize(bool full) {
   }
   graph_dirty_ = false;
   merges_since_optimize_ = 0;
+  return Status::Ok();
+}
+
+void MapManager::noteSolve(const PoseGraph& graph, const PoseGraphResult& r, bool incremental, double ms) {
+  timings_.add(incremental ? "pose_graph_incremental" : "pose_graph_full", ms);
+  timings_.add("pose_graph", ms);
+  graph_diag_.result = r;
+  graph_diag_.edges = graph.residuals();
+  ++graph_diag_.solves;
+  if (!r.converged) ++graph_diag_.not_converged;
+  graph_diag_.incremental += incremental;
+  graph_diag_.last_incremental = incremental;
+  graph_diag_.last_free_nodes = graph.numFree();
+  graph_diag_.last_nodes = graph.numNodes();
+  incremental_since_full_ = incremental ? incremental_since_full_ + 1 : 0;
+}
+
+bool MapManager::fullSolveDue() const {
+  const PoseGraphParams& pg = params_.pose_graph;
+  return pg.full_between_merges && pg.incremental_hops > 0 && graph_diag_.solves > 0 &&
+         incremental_since_full_ >= pg.full_every;
+}
+
+Expected<FullSolve> MapManager::prepareFullSolve() const {
+  Expected<PoseGraph> built = buildPoseGraph();
+  if (!built) return Error{"full solve: " + built.error()};
+  FullSolve job{std::move(*built), {}, std::nullopt, 0};
+  job.snapshot = job.graph.poses();
+  return job;
+}
+
+void FullSolve::run() {
+  const auto t0 = std::chrono::steady_clock::now();
+  result = graph.optimize();
+  ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+Status MapManager::applyFullSolve(const FullSolve& job) {
+  if (!job.result) return Error{"full solve: not run"};
+  if (!*job.result) return Error{"full solve: " + job.result->error()};
+  noteSolve(job.graph, **job.result, /*incremental=*/false, job.ms);
+  // Each keyframe the solve saw moves by its correction (solved * snapshot^-1,
+  // the identity of the solve's frame when nothing merged meanwhile); one added
+  // since moves with the last keyframe before it on its trajectory, and is
+  // left to the next incremental solve (touched).
+  for (auto& [tid, t] : map_.trajectories) {
+    if (!t.anchored) continue;
+    std::optional<SE3> correction;
+    for (auto& [id, kf] : t.keyframes) {
+      const KeyframeKey key = keyOf(t, id);
+      auto before = job.snapshot.find(key);
+      auto solved = job.graph.pose(key);
+      if (before != job.snapshot.end() && solved) {
+        correction = *solved * before->second.inverse();
+        kf.T_W_C = before->second.matrix() == kf.T_W_C.matrix() ? *solved : *correction * kf.T_W_C;
+      } else {
+        if (correction) kf.T_W_C = *correction * kf.T_W_C;
+        touched_.insert(key);
+      }
+    }
+  }
   return Status::Ok();
 }
 

@@ -29,7 +29,9 @@ Status PoseGraphParams::read(const Config& config, const std::string& prefix) {
                    config.get(p + "function_tolerance", &function_tolerance),
                    config.get(p + "num_threads", &num_threads),
                    config.get(p + "incremental_hops", &incremental_hops),
-                   config.get(p + "full_every", &full_every)}) {
+                   config.get(p + "full_every", &full_every),
+                   config.get(p + "incremental_max_free", &incremental_max_free),
+                   config.get(p + "full_between_merges", &full_between_merges)}) {
     if (!s) return s;
   }
   if (Status s = validate(); !s) return Error{prefix + ": " + s.error()};
@@ -56,6 +58,8 @@ void PoseGraphParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(p + "num_threads", num_threads);
   w->set(p + "incremental_hops", incremental_hops);
   w->set(p + "full_every", full_every);
+  w->set(p + "incremental_max_free", incremental_max_free);
+  w->set(p + "full_between_merges", full_between_merges);
 }
 
 Status PoseGraphParams::validate() const {
@@ -83,6 +87,7 @@ Status PoseGraphParams::validate() const {
   if (num_threads < 1) return Error{"num_threads must be >= 1"};
   if (incremental_hops < 0) return Error{"incremental_hops must be >= 0"};
   if (full_every < 1) return Error{"full_every must be >= 1"};
+  if (incremental_max_free < 0) return Error{"incremental_max_free must be >= 0"};
   return Status::Ok();
 }
 
@@ -183,7 +188,7 @@ Status PoseGraph::fixFirstPoseOf(std::uint32_t agent) {
   return Error{"pose graph: agent " + std::to_string(agent) + " has no nodes to fix"};
 }
 
-std::size_t PoseGraph::holdBeyond(const std::vector<KeyframeKey>& seeds, int hops) {
+std::size_t PoseGraph::holdBeyond(const std::vector<KeyframeKey>& seeds, int hops, std::size_t max_free) {
   std::map<KeyframeKey, std::vector<KeyframeKey>> adjacent;
   for (const std::vector<Edge>* edges : {&odometry_, &loops_})
     for (const Edge& e : *edges) {
@@ -195,11 +200,12 @@ std::size_t PoseGraph::holdBeyond(const std::vector<KeyframeKey>& seeds, int hop
   std::vector<KeyframeKey> layer;
   for (const KeyframeKey& k : seeds)
     if (nodes_.count(k) && depth.emplace(k, 0).second) layer.push_back(k);
-  for (int d = 1; d <= hops && !layer.empty(); ++d) {
+  const auto full = [&] { return max_free > 0 && depth.size() >= max_free; };
+  for (int d = 1; d <= hops && !layer.empty() && !full(); ++d) {
     std::vector<KeyframeKey> next;
     for (const KeyframeKey& k : layer)
       for (const KeyframeKey& n : adjacent[k])
-        if (depth.emplace(n, d).second) next.push_back(n);
+        if (!full() && depth.emplace(n, d).second) next.push_back(n);
     layer = std::move(next);
   }
   for (auto& [key, node] : nodes_) node.held = !depth.count(key);

@@ -79,7 +79,8 @@ Server::Server(const ServerParams& params, std::shared_ptr<const Vocabulary> voc
                 ReceiverGuards{keyring_ ? &*keyring_ : nullptr,
                                [this](RobotId robot, std::size_t bytes) {
                                  return quotas_.admit(robot, bytes);
-                               }}) {
+                               }}),
+      timings_(static_cast<std::size_t>(params.map.timing_window)) {
   HERMES_CHECK(params_.auth.enabled == keyring_.has_value(),
                "server: a keyring is needed exactly when server.auth.enabled");
   map_.setBookkeeperLock(&intake_mu_);
@@ -206,7 +207,9 @@ int Server::process(double now, int max_submaps) {
   }
   // Closures the merges' budget deferred, one budget's worth while no submap
   // waits (closure_budget.h): a submap never waits behind them.
-  if (drained && params_.map.closure_budget > 0 && map_.deferredClosures() > 0) {
+  if (drained && !full_solves_external_ && map_.fullSolveDue()) {
+    solveFullInline();
+  } else if (drained && params_.map.closure_budget > 0 && map_.deferredClosures() > 0) {
     MergeStats stats;
     auto closed = guarded("deferred loop closures",
                           [&] { return map_.closeDeferred(params_.map.closure_budget, credibility, &stats); });
@@ -220,6 +223,29 @@ int Server::process(double now, int max_submaps) {
   if (popped > 0 && store_ && now - last_checkpoint_ >= params_.checkpoint.period_s)
     (void)checkpoint(now);  // counted and kept in durability(); the journal still holds everything
   return merged;
+}
+
+void Server::solveFullInline() {
+  Status solved = guarded("full pose-graph solve", [&]() -> Status {
+    Expected<FullSolve> job = map_.prepareFullSolve();
+    if (!job) return Error{job.error()};
+    job->run();
+    return map_.applyFullSolve(*job);
+  });
+  if (!solved) {
+    map_.postponeFullSolve();
+    ++counters_.merge_errors;
+    counters_.last_error = solved.error();
+  }
+}
+
+void Server::applyFullSolve(const FullSolve& job) {
+  Status applied = guarded("full pose-graph solve", [&] { return map_.applyFullSolve(job); });
+  if (!applied) {
+    map_.postponeFullSolve();
+    ++counters_.merge_errors;
+    counters_.last_error = applied.error();
+  }
 }
 
 void Server::noteSlowMerge(MergeBreakdown m) {

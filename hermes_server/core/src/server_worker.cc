@@ -25,6 +25,7 @@ ServerWorker::ServerWorker(std::unique_ptr<Server> server, ServerWorkerParams pa
   const ServerCounters& c = server_->counters();
   attempts_seen_ = c.merged + c.merge_errors;
   if (!params_.parallel) return;
+  server_->leaveFullSolvesToCaller(true);
   work_ = server_->pending() > 0;  // resumed with submaps queued
   running_ = true;
   thread_ = std::thread([this] { loop(); });
@@ -68,10 +69,17 @@ void ServerWorker::loop() {
     // One submap per call: a stop request is seen between merges, and every
     // merge gets its own view.
     // Then the deferred loop closures, a budget at a time, each after any
-    // submap that came meanwhile.
-    while (!stopping_ && (server_->pending() > 0 || server_->deferredClosures() > 0)) {
-      server_->process(clock_(), 1);
-      publish();
+    // submap that came meanwhile; beside both, the full pose-graph solve.
+    while (!stopping_) {
+      const bool solving = tendFullSolve();
+      if (server_->pending() > 0 || server_->deferredClosures() > 0) {
+        server_->process(clock_(), 1);
+        publish();
+      } else if (solving) {
+        full_solve_done_.wait_for(std::chrono::milliseconds(20));
+      } else {
+        break;
+      }
     }
     l.lock();
     merging_ = false;
@@ -81,10 +89,30 @@ void ServerWorker::loop() {
   idle_.notify_all();
 }
 
-void ServerWorker::publish() {
+bool ServerWorker::tendFullSolve() {
+  if (full_solve_ && full_solve_done_.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+    full_solve_done_.get();
+    server_->applyFullSolve(*full_solve_);
+    full_solve_.reset();
+    publish(/*force=*/true);
+  }
+  if (!full_solve_ && !stopping_ && server_->fullSolveDue()) {
+    Expected<FullSolve> job = server_->mapManager().prepareFullSolve();
+    if (!job) {
+      server_->applyFullSolve(FullSolve{PoseGraph(), {}, Expected<PoseGraphResult>(Error{job.error()}), 0});
+      return false;
+    }
+    full_solve_ = std::make_shared<FullSolve>(std::move(*job));
+    std::shared_ptr<FullSolve> solve = full_solve_;
+    full_solve_done_ = std::async(std::launch::async, [solve] { solve->run(); });
+  }
+  return full_solve_ != nullptr;
+}
+
+void ServerWorker::publish(bool force) {
   const ServerCounters& c = server_->counters();
   const std::size_t attempts = c.merged + c.merge_errors;
-  if (attempts == attempts_seen_) return;
+  if (attempts == attempts_seen_ && !force) return;
   attempts_seen_ = attempts;
   auto v = std::make_shared<MergedView>(mergedView(*server_));
   {

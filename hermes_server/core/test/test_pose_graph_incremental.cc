@@ -83,11 +83,15 @@ TEST(PoseGraphIncremental, HoldsWhatIsFartherThanHopsFromTheSeeds) {
   EXPECT_EQ(g.holdBeyond({{0, 0, 5}, {7, 7, 7}}, 1), 3u);  // 4, 5, 6; an unknown seed is ignored
   EXPECT_EQ(g.holdBeyond({}, 5), 0u);
   EXPECT_EQ(g.holdBeyond({{0, 0, 2}}, 100), 9u);            // all but the fixed one
+  // A cap on the free nodes: the nearest first; every seed stays free.
+  EXPECT_EQ(g.holdBeyond({{0, 0, 9}}, 3, 2), 2u);            // 9, then 8
+  EXPECT_EQ(g.holdBeyond({{0, 0, 5}}, 100, 3), 3u);          // 5, then 4 and 6
+  EXPECT_EQ(g.holdBeyond({{0, 0, 1}, {0, 0, 5}, {0, 0, 9}}, 2, 2), 3u);
 }
 
 /// A full and an incremental solve of the same grown graph under `params`;
 /// `tight`: the incremental one must match the full one closely.
-void compareIncrementalWithFull(const PoseGraphParams& params, bool tight) {
+void compareIncrementalWithFull(const PoseGraphParams& params, bool tight, std::size_t max_free = 0) {
   std::mt19937 rng(3);
   // Before: three robots of 60 keyframes, solved in full.
   Measurements m;
@@ -105,7 +109,7 @@ void compareIncrementalWithFull(const PoseGraphParams& params, bool tight) {
   PoseGraph incremental = build(m, solved, params);
   const std::map<KeyframeKey, SE3> unsolved = incremental.poses();  // new keyframes chained by odometry
   ASSERT_TRUE(full.optimize().ok());
-  const std::size_t free = incremental.holdBeyond(touched, 8);
+  const std::size_t free = incremental.holdBeyond(touched, 8, max_free);
   auto r = incremental.optimize();
   ASSERT_TRUE(r.ok()) << r.error();
   double worst_t = 0, worst_new = 0, worst_r = 0, ate_full = 0, ate_incr = 0, moved = 0, rms_incr = 0, rms_none = 0;
@@ -129,6 +133,7 @@ void compareIncrementalWithFull(const PoseGraphParams& params, bool tight) {
               free, full.numNodes(), moved * 1e3, rms_incr * 1e3, worst_t * 1e3, worst_new * 1e3, worst_r / kDeg,
               rms_none * 1e3, std::sqrt(ate_full / n) * 1e3, std::sqrt(ate_incr / n) * 1e3);
   EXPECT_LT(free, full.numNodes() / 2);  // touches far fewer nodes
+  if (max_free > 0) EXPECT_LE(free, max_free);
   EXPECT_GT(free, touched.size());       // and more than the new ones
   EXPECT_LT(std::sqrt(ate_incr / n), 1.2 * std::sqrt(ate_full / n) + 0.002);  // as accurate
   if (!tight) {
@@ -163,6 +168,15 @@ TEST(PoseGraphIncremental, WithLocalReweightingIsAsAccurateAsTheFullSolve) {
   // is the full solve's (ATE 43.9 vs 44.9 mm). The next full solve
   // (full_every) realigns them.
   compareIncrementalWithFull(PoseGraphParams(), false);
+}
+
+TEST(PoseGraphIncremental, ACappedFreeSetStaysCloseToTheFullSolve) {
+  // pose_graph.incremental_max_free: where loops tie every robot, 8 hops reach
+  // the whole graph; the cap frees the nodes nearest the change only (here 40
+  // of the 78 that 8 hops free).
+  PoseGraphParams both;
+  both.odometry_reweight_scope = "both";
+  compareIncrementalWithFull(both, false, 40);
 }
 
 }  // namespace

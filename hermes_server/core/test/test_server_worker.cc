@@ -33,8 +33,10 @@ const fixture::Fixture& hall() {
 
 std::vector<const std::vector<std::uint8_t>*> schedule() { return fixture::roundRobin(hall()); }
 
-std::unique_ptr<Server> makeServer(const std::string& checkpoint_dir = "", int closure_budget = 0) {
+std::unique_ptr<Server> makeServer(const std::string& checkpoint_dir = "", int closure_budget = 0,
+                                   int full_every = 5) {
   ServerParams params;
+  params.map.pose_graph.full_every = full_every;
   params.checkpoint.dir = checkpoint_dir;
   params.map.closure_budget = closure_budget;
   auto server = Server::create(params, HERMES_SOURCE_DIR);
@@ -152,7 +154,10 @@ TEST(ServerWorker, ThreadedAndSynchronousEndWithTheSameMap) {
     threaded.waitIdle();  // one submap at a time: the same merge order
   }
   threaded.stop();
-  EXPECT_EQ(published.size(), frames.size());
+  // One view per merge, and one per full pose-graph solve between merges.
+  const std::size_t full_between =
+      threaded.server().timings().count("pose_graph_full") - 1;  // the first solve is a merge's
+  EXPECT_EQ(published.size(), frames.size() + full_between);
   const MapSummary a = summarize(sync.server()), b = summarize(threaded.server());
   EXPECT_GT(a.keyframes, 0u);
   EXPECT_GT(a.accepted, 0u) << "the fixture should close loops";
@@ -194,6 +199,90 @@ TEST(ServerWorker, DeferredClosuresAreVerifiedBeforeTheThreadIdles) {
   EXPECT_GT(deferred.load(), 0) << "a budget of 2 should defer closures on this fixture";
   EXPECT_GT(worker.server().mapManager().loopsAccepted(), 0u);
   EXPECT_EQ(worker.server().counters().merge_errors, 0u) << worker.server().counters().last_error;
+}
+
+// server.pose_graph.full_between_merges: a merge solves the pose graph only
+// incrementally (after the first solve); the full solve falls due and runs
+// once no submap waits.
+TEST(ServerWorker, MergesSolveIncrementallyTheFullSolveRunsBetweenThem) {
+  const auto frames = schedule();
+  std::unique_ptr<Server> server = makeServer("", 0, /*full_every=*/2);
+  ASSERT_TRUE(server);
+  for (std::size_t i = 0; i < frames.size(); ++i)
+    ASSERT_EQ(server->onFrame(frames[i]->data(), frames[i]->size(), nullptr, 1.0).verdict, ArrivalVerdict::kAccept);
+  bool was_due = false;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const int solves = server->mapManager().graphDiagnostics().solves;
+    ASSERT_EQ(server->process(2.0 + i, 1), 1);  // a submap waits after it: no full solve
+    const GraphDiagnostics& g = server->mapManager().graphDiagnostics();
+    if (solves > 0 && g.solves > solves) EXPECT_TRUE(g.last_incremental) << "merge " << i;
+    was_due = was_due || server->fullSolveDue();
+  }
+  ASSERT_TRUE(was_due) << "the fixture should make a full solve due";
+  const std::size_t full_before = server->timings().count("pose_graph_full");
+  EXPECT_EQ(server->process(99.0), 0);  // nothing waits: the full solve
+  EXPECT_FALSE(server->fullSolveDue());
+  EXPECT_EQ(server->timings().count("pose_graph_full"), full_before + 1);
+  EXPECT_FALSE(server->mapManager().graphDiagnostics().last_incremental);
+  EXPECT_EQ(server->counters().merge_errors, 0u) << server->counters().last_error;
+}
+
+// server.map.timing_window: a server of a day-long mission keeps the last W
+// timing samples per stage, not one per merge since it started.
+TEST(ServerWorker, TimingsKeepABoundedWindowPerStage) {
+  const auto frames = schedule();
+  ServerParams params;
+  params.map.timing_window = 2;
+  auto server = Server::create(params, HERMES_SOURCE_DIR);
+  ASSERT_TRUE(server.ok()) << server.error();
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    ASSERT_EQ((*server)->onFrame(frames[i]->data(), frames[i]->size(), nullptr, 1.0 + i).verdict,
+              ArrivalVerdict::kAccept);
+    (*server)->process(1.0 + i);
+  }
+  const TimingStats t = (*server)->timings();
+  ASSERT_GE(t.count("submap"), frames.size());  // count is every sample
+  for (const auto& [stage, samples] : t.samples()) EXPECT_LE(samples.size(), 4u) << stage;
+}
+
+// The threaded server solves in full on a thread of its own while merges go
+// on; a result lands on keyframes merged meanwhile by their trajectory's
+// correction. The map ends where the synchronous server's does (within the
+// fixture's noise: the solves see the graph at other moments).
+TEST(ServerWorker, AFullSolveBesideTheMergesEndsWithTheSynchronousMap) {
+  const auto frames = schedule();
+  std::unique_ptr<Server> sync = makeServer("", 0, 2);
+  ASSERT_TRUE(sync);
+  std::atomic<double> now{0};
+  ServerWorker threaded(makeServer("", 0, 2), ServerWorkerParams{}, [&now] { return now.load(); });
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    now = 1.0 + i;
+    ASSERT_EQ(sync->onFrame(frames[i]->data(), frames[i]->size(), nullptr, now).verdict, ArrivalVerdict::kAccept);
+    sync->process(now);
+    ASSERT_EQ(threaded.onFrame(frames[i]->data(), frames[i]->size(), nullptr, now).verdict,
+              ArrivalVerdict::kAccept);  // no waiting: merges and full solves overlap
+  }
+  threaded.waitIdle();
+  threaded.stop();
+  const Server& t = threaded.server();
+  EXPECT_EQ(t.counters().merge_errors, 0u) << t.counters().last_error;
+  EXPECT_EQ(t.counters().merged, frames.size());
+  EXPECT_FALSE(t.fullSolveDue());
+  EXPECT_GE(t.timings().count("pose_graph_full"), 2u);
+  const MapSummary a = summarize(*sync), b = summarize(t);
+  ASSERT_GT(a.poses.size(), 0u);
+  EXPECT_EQ(a.keyframes, b.keyframes);
+  std::size_t common = 0;
+  double worst = 0;
+  for (const auto& [key, T] : a.poses) {
+    auto it = b.poses.find(key);
+    if (it == b.poses.end()) continue;
+    ++common;
+    ASSERT_TRUE(it->second.translation().allFinite());
+    worst = std::max(worst, (T.translation() - it->second.translation()).norm());
+  }
+  EXPECT_GE(common, a.poses.size() * 9 / 10);
+  EXPECT_LT(worst, 0.05) << "threaded and synchronous maps differ by " << worst << " m";
 }
 
 TEST(ServerWorker, StopWithSubmapsQueuedLosesNone) {

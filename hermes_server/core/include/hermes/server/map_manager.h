@@ -86,6 +86,10 @@ struct MapManagerParams {
   /// others are deferred (closeDeferred()), and so are all the loops a merge's
   /// keyframe extensions would measure again. 0 = verify all in the merge.
   int closure_budget = 0;
+  /// Stage timings (the map manager's and the server's) keep the last this many
+  /// samples per stage for median / p95 (0 = all: a day-long mission would grow
+  /// them, and the checkpoints that hold them, with every merge).
+  int timing_window = 10000;
   /// Closures over the budget wait here (oldest dropped beyond this many) and
   /// are verified by closeDeferred() while no submap waits.
   int deferred_closures = 1024;
@@ -143,6 +147,18 @@ struct GraphDiagnostics {
   std::size_t last_free_nodes = 0, last_nodes = 0;  ///< the last solve's free / all nodes
 };
 
+/// A full pose-graph solve taken out of the merges (pose_graph.full_between_merges):
+/// the graph as it stood when prepared and its poses then; run() solves it on any
+/// thread (it touches nothing else), MapManager::applyFullSolve() brings the result
+/// into the map on the merging thread, also after merges that came meanwhile.
+struct FullSolve {
+  PoseGraph graph;
+  std::map<KeyframeKey, SE3> snapshot;
+  std::optional<Expected<PoseGraphResult>> result;  ///< set by run()
+  double ms = 0;                                     ///< run()'s wall time
+  void run();
+};
+
 /// One loop-closure attempt (diagnostics): a new keyframe's place query and,
 /// per candidate tried, what geometric verification said. A query without any
 /// candidate is reported once with `candidate` empty.
@@ -192,6 +208,13 @@ class MapManager {
   /// unless `full`, incremental_hops is 0, no solve was done yet or full_every
   /// incremental solves were.
   Status optimize(bool full = false);
+  /// A full solve is due and merges leave it to the caller (full_between_merges):
+  /// prepareFullSolve(), FullSolve::run(), applyFullSolve().
+  bool fullSolveDue() const;
+  Expected<FullSolve> prepareFullSolve() const;
+  Status applyFullSolve(const FullSolve& job);
+  /// After a failed one: due again only after full_every more incremental solves.
+  void postponeFullSolve() { incremental_since_full_ = 0; }
   /// The pose graph optimize() would solve, at the current poses.
   Expected<PoseGraph> buildPoseGraph() const;
   /// Writes that graph as g2o text (pose_graph_io.h).
@@ -316,6 +339,7 @@ class MapManager {
   /// accepted / dropped / re-measured, keyframes of newly anchored robots.
   std::set<KeyframeKey> touched_;
   int incremental_since_full_ = 0;
+  void noteSolve(const PoseGraph& graph, const PoseGraphResult& r, bool incremental, double ms);
   std::optional<TrajectoryId> world_traj_;
   CandidateHook candidate_hook_;
   LoopHook loop_hook_;

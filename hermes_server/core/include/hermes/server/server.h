@@ -123,6 +123,14 @@ class Server {
   /// Loop closures deferred by the merges' budget (server.map.closure_budget),
   /// verified by process() while no submap waits (the merging thread).
   std::size_t deferredClosures() const { return map_.deferredClosures(); }
+  /// Full pose-graph solves due between merges (server.pose_graph.full_between_merges):
+  /// process() runs one while no submap waits, unless the caller takes them over
+  /// (the threaded worker solves on a thread of its own: fullSolveDue(),
+  /// MapManager::prepareFullSolve(), FullSolve::run(), applyFullSolve()).
+  void leaveFullSolvesToCaller(bool caller) { full_solves_external_ = caller; }
+  bool fullSolveDue() const { return map_.fullSolveDue(); }
+  /// Applies a solved job; a failed one is counted as a merge error (last_error).
+  void applyFullSolve(const FullSolve& job);
   /// Holds the intake state still for a reader on another thread than the
   /// receiving one (briefly: onFrame() waits meanwhile). Never while calling
   /// onFrame(), process() or checkpoint() on the same thread.
@@ -164,6 +172,8 @@ class Server {
   Status loadState(const std::vector<std::uint8_t>& body);
 
  private:
+  void solveFullInline();
+  bool full_solves_external_ = false;
   struct Pending {
     ReceivedSubmap submap;
     std::vector<std::uint8_t> frame;  ///< as received (for checkpoints; empty if not via onFrame)

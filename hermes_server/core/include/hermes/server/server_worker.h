@@ -41,6 +41,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <future>
 #include <thread>
 
 #include "hermes/core/metrics.h"
@@ -100,8 +101,11 @@ class ServerWorker {
 
  private:
   void loop();
-  /// Publishes a new view when a merge happened since the last one.
-  void publish();
+  /// Publishes a new view when a merge happened since the last one (or `force`).
+  void publish(bool force = false);
+  /// The full pose-graph solve on a thread of its own (merge thread only):
+  /// applies a finished one, starts a due one. Returns true while one runs.
+  bool tendFullSolve();
 
   std::unique_ptr<Server> server_;
   const ServerWorkerParams params_;
@@ -116,6 +120,8 @@ class ServerWorker {
   std::size_t attempts_seen_ = 0;  ///< merges + merge errors at the last view (merge thread)
   TimingStats acks_;
   std::thread thread_;
+  std::shared_ptr<FullSolve> full_solve_;  ///< running on full_solve_thread_ (merge thread's)
+  std::future<void> full_solve_done_;
 };
 
 }  // namespace server
