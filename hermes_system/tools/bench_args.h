@@ -11,6 +11,9 @@
 
 namespace hermes::system::bench {
 
+/// The whole Machine Hall set (five robots in one hall).
+constexpr const char* kMachineHall = "MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult";
+
 /// "a,b,,c" -> {a, b, c}
 inline std::vector<std::string> split(const std::string& s) {
   std::vector<std::string> out;

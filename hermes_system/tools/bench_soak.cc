@@ -126,7 +126,7 @@ int fail(const std::string& msg) {
 
 int main(int argc, char** argv) {
   system::MissionPlan plan;
-  plan.sequences = split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult");
+  plan.sequences = split(hermes::system::bench::kMachineHall);
   std::string data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
   std::string tracking_dir, trace, out, json_out, robot_restart;
   double bandwidth = 10, server_restart_at = 90, health_period = 30;

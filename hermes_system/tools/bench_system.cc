@@ -347,7 +347,7 @@ Expected<std::pair<std::string, std::vector<std::string>>> fullSet(const std::st
   const std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/";
   if (name == "mh")
     return std::make_pair(cache + "mh_full",
-                          split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult"));
+                          split(hermes::system::bench::kMachineHall));
   if (name == "v1") return std::make_pair(cache + "v1_full", split("V1_01_easy,V1_02_medium,V1_03_difficult"));
   return Error{"--full: unknown set '" + name + "' (mh or v1)"};
 }
@@ -477,7 +477,7 @@ int main(int argc, char** argv) {
   std::string run_out;
   std::string swarm_data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
   std::vector<std::string> swarm_seqs =
-      split("MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult");
+      split(hermes::system::bench::kMachineHall);
   std::vector<std::string> overrides;
   std::string full, full_out;
   bool variants_given = false, bandwidths_given = false, duration_given = false;
