@@ -70,8 +70,10 @@ const char* kUsage =
     "  --swarm L        instead: swarm sizes (e.g. 2,5,10,15,20) sharing one\n"
     "                   --swarm-bandwidth link (default 50 Mbit/s, paper Fig. 18); robot k\n"
     "                   flies --duration s of sequence k mod S (of --swarm-sequences) from\n"
-    "                   start 20 * (k / S) s: time windows of whole-sequence renders in\n"
+    "                   start F + 20 * (k / S) s: time windows of whole-sequence renders in\n"
     "                   one hall; variants default to hermes,raw\n"
+    "  --swarm-first F  first start [s] (default 0; at 0 five robots fly the first 15 s\n"
+    "                   of MH_01-05, which barely see each other; from 20 s they meet)\n"
     "  --swarm-bandwidth M  shared link of the swarm sweep [Mbit/s] (default 50)\n"
     "  --swarm-data DIR     whole-sequence renders (default data_cache/mh_full; rendered\n"
     "                   from ../shared/data/euroc_gt, else config/trajectories, when missing)\n"
@@ -172,17 +174,18 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
 }
 
 /// Swarm of n robots: robot k flies `duration` s of sequence k mod S from
-/// start 20 * (k / S) s, a window view (dataset_window.h) of the whole-sequence
+/// start first + 20 * (k / S) s, a window view (dataset_window.h) of the whole-sequence
 /// render in `data` (rendered there first when a sequence is missing), written
 /// under `views`.
 Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::string>& seqs,
-                             const std::string& views, double duration, double rate, int n) {
+                             const std::string& views, double duration, double rate, int n,
+                             int first) {
   if (Status s = system::ensureWholeRenders(data, seqs, groundTruthDir(), rate); !s)
     return Error{s.error()};
   Robots robots;
   for (int k = 0; k < n; ++k) {
     const std::string& seq = seqs[k % seqs.size()];
-    const int start = 20 * (k / static_cast<int>(seqs.size()));
+    const int start = first + 20 * (k / static_cast<int>(seqs.size()));
     const std::string name = seq + (start ? "_s" + std::to_string(start) : "");
     const fs::path view = fs::path(views) / name;
     auto w = system::writeEurocWindow((fs::path(data) / seq).string(), start, duration, view.string());
@@ -476,6 +479,7 @@ int main(int argc, char** argv) {
   std::string swarm_bw = "50";
   std::string run_out;
   std::string swarm_data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
+  int swarm_first = 0;
   std::vector<std::string> swarm_seqs =
       split(hermes::system::bench::kMachineHall);
   std::vector<std::string> overrides;
@@ -516,6 +520,13 @@ int main(int argc, char** argv) {
       run_out = next();
     } else if (a == "--swarm-data") {
       swarm_data = next();
+    } else if (a == "--swarm-first") {
+      const std::string v = next();
+      char* end = nullptr;
+      swarm_first = static_cast<int>(std::strtol(v.c_str(), &end, 10));
+      if (end == v.c_str() || *end != '\0' || swarm_first < 0)
+        return std::fprintf(stderr, "hermes_bench_system: --swarm-first needs whole seconds >= 0 (got '%s')\n",
+                            v.c_str()), 2;
     } else if (a == "--swarm-sequences") {
       swarm_seqs = split(next());
     } else if (a == "--full") {
@@ -571,7 +582,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%-7s %3s %8s %8s %9s %13s %6s %8s %8s %9s %6s %5s\n", "variant", "n", "merged",
                  "ATE[cm]", "kB", "kB/s mean/pk", "lost%", "srv med", "srv p95", "state MB", "wall", "load");
     for (const std::string& n : swarm) {
-      auto robots = swarmRobots(swarm_data, swarm_seqs, views, duration, rate, std::atoi(n.c_str()));
+      auto robots = swarmRobots(swarm_data, swarm_seqs, views, duration, rate, std::atoi(n.c_str()), swarm_first);
       if (!robots.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", robots.error().c_str()), 1;
       for (const std::string& v : variants) {
         auto j = runVariant(v, swarm_bw, *robots, overrides, nullptr,
@@ -586,7 +597,7 @@ int main(int argc, char** argv) {
     std::error_code ec;
     fs::remove_all(views, ec);
     return writeJson({{"bench", "system_swarm"}, {"data", swarm_data}, {"sequences", swarm_seqs},
-                      {"duration_s", duration}, {"rate_hz", rate},
+                      {"duration_s", duration}, {"rate_hz", rate}, {"first_s", swarm_first},
                       {"bandwidth_mbitps", std::atof(swarm_bw.c_str())}, {"overrides", overrides},
                       {"runs", runs}},
                      json_out);
