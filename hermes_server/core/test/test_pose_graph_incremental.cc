@@ -133,7 +133,9 @@ void compareIncrementalWithFull(const PoseGraphParams& params, bool tight, std::
               free, full.numNodes(), moved * 1e3, rms_incr * 1e3, worst_t * 1e3, worst_new * 1e3, worst_r / kDeg,
               rms_none * 1e3, std::sqrt(ate_full / n) * 1e3, std::sqrt(ate_incr / n) * 1e3);
   EXPECT_LT(free, full.numNodes() / 2);  // touches far fewer nodes
-  if (max_free > 0) EXPECT_LE(free, max_free);
+  if (max_free > 0) {
+    EXPECT_LE(free, max_free);
+  }
   EXPECT_GT(free, touched.size());       // and more than the new ones
   EXPECT_LT(std::sqrt(ate_incr / n), 1.2 * std::sqrt(ate_full / n) + 0.002);  // as accurate
   if (!tight) {

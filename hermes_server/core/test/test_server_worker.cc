@@ -215,7 +215,9 @@ TEST(ServerWorker, MergesSolveIncrementallyTheFullSolveRunsBetweenThem) {
     const int solves = server->mapManager().graphDiagnostics().solves;
     ASSERT_EQ(server->process(2.0 + i, 1), 1);  // a submap waits after it: no full solve
     const GraphDiagnostics& g = server->mapManager().graphDiagnostics();
-    if (solves > 0 && g.solves > solves) EXPECT_TRUE(g.last_incremental) << "merge " << i;
+    if (solves > 0 && g.solves > solves) {
+      EXPECT_TRUE(g.last_incremental) << "merge " << i;
+    }
     was_due = was_due || server->fullSolveDue();
   }
   ASSERT_TRUE(was_due) << "the fixture should make a full solve due";
