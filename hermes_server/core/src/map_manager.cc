@@ -482,7 +482,11 @@ Expected<FullSolve> MapManager::prepareFullSolve() const {
 
 void FullSolve::run() {
   const auto t0 = std::chrono::steady_clock::now();
-  result = graph.optimize();
+  try {  // on a thread of its own: an exception there would end the process
+    result = graph.optimize();
+  } catch (const std::exception& e) {
+    result = Expected<PoseGraphResult>(Error{std::string("threw ") + e.what()});
+  }
   ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 

@@ -226,26 +226,27 @@ int Server::process(double now, int max_submaps) {
 }
 
 void Server::solveFullInline() {
-  Status solved = guarded("full pose-graph solve", [&]() -> Status {
-    Expected<FullSolve> job = map_.prepareFullSolve();
-    if (!job) return Error{job.error()};
-    job->run();
-    return map_.applyFullSolve(*job);
-  });
-  if (!solved) {
-    map_.postponeFullSolve();
-    ++counters_.merge_errors;
-    counters_.last_error = solved.error();
-  }
+  Expected<FullSolve> job = prepareFullSolve();
+  if (!job) return;
+  job->run();
+  applyFullSolve(*job);
+}
+
+Expected<FullSolve> Server::prepareFullSolve() {
+  Expected<FullSolve> job = guarded("full pose-graph solve", [&] { return map_.prepareFullSolve(); });
+  if (!job) fullSolveFailed(job.error());
+  return job;
 }
 
 void Server::applyFullSolve(const FullSolve& job) {
   Status applied = guarded("full pose-graph solve", [&] { return map_.applyFullSolve(job); });
-  if (!applied) {
-    map_.postponeFullSolve();
-    ++counters_.merge_errors;
-    counters_.last_error = applied.error();
-  }
+  if (!applied) fullSolveFailed(applied.error());
+}
+
+void Server::fullSolveFailed(const std::string& error) {
+  map_.postponeFullSolve();
+  ++counters_.merge_errors;
+  counters_.last_error = error;
 }
 
 void Server::noteSlowMerge(MergeBreakdown m) {

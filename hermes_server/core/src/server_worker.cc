@@ -97,11 +97,8 @@ bool ServerWorker::tendFullSolve() {
     publish(/*force=*/true);
   }
   if (!full_solve_ && !stopping_ && server_->fullSolveDue()) {
-    Expected<FullSolve> job = server_->mapManager().prepareFullSolve();
-    if (!job) {
-      server_->applyFullSolve(FullSolve{PoseGraph(), {}, Expected<PoseGraphResult>(Error{job.error()}), 0});
-      return false;
-    }
+    Expected<FullSolve> job = server_->prepareFullSolve();
+    if (!job) return false;  // counted by the server
     full_solve_ = std::make_shared<FullSolve>(std::move(*job));
     std::shared_ptr<FullSolve> solve = full_solve_;
     full_solve_done_ = std::async(std::launch::async, [solve] { solve->run(); });

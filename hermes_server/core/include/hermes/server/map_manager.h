@@ -156,7 +156,7 @@ struct FullSolve {
   std::map<KeyframeKey, SE3> snapshot;
   std::optional<Expected<PoseGraphResult>> result;  ///< set by run()
   double ms = 0;                                     ///< run()'s wall time
-  void run();
+  void run();  ///< never throws: an exception becomes an error result
 };
 
 /// One loop-closure attempt (diagnostics): a new keyframe's place query and,

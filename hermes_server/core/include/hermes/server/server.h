@@ -129,7 +129,9 @@ class Server {
   /// MapManager::prepareFullSolve(), FullSolve::run(), applyFullSolve()).
   void leaveFullSolvesToCaller(bool caller) { full_solves_external_ = caller; }
   bool fullSolveDue() const { return map_.fullSolveDue(); }
-  /// Applies a solved job; a failed one is counted as a merge error (last_error).
+  /// The graph to solve now (merging thread); a failure is counted as a merge
+  /// error (last_error) and the solve postponed, as is a failed applyFullSolve().
+  Expected<FullSolve> prepareFullSolve();
   void applyFullSolve(const FullSolve& job);
   /// Holds the intake state still for a reader on another thread than the
   /// receiving one (briefly: onFrame() waits meanwhile). Never while calling
@@ -173,6 +175,7 @@ class Server {
 
  private:
   void solveFullInline();
+  void fullSolveFailed(const std::string& error);
   bool full_solves_external_ = false;
   struct Pending {
     ReceivedSubmap submap;
