@@ -39,6 +39,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 
+#include "bench_args.h"
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/agent/orb_extractor.h"
 #include "hermes/agent/tracker.h"
@@ -166,22 +167,15 @@ int main(int argc, char** argv) {
   double duration = 40, map_until = 25;
   bool timing_only = false;
   std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/bench_mapuse", json_out;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "hermes_bench_mapuse: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--help" || a == "-h") return std::cout << kUsage, 0;
-    if (a == "--duration") duration = std::atof(next().c_str());
-    else if (a == "--map-until") map_until = std::atof(next().c_str());
-    else if (a == "--cache") cache = next();
-    else if (a == "--json") json_out = next();
-    else if (a == "--timing-only") timing_only = true;
-    else return std::fprintf(stderr, "hermes_bench_mapuse: unknown argument '%s'\n", a.c_str()), 2;
+  hermes::system::bench::Options opt(argc, argv, "hermes_bench_mapuse");
+  while (opt.next()) {
+    if (opt.is("--help") || opt.is("-h")) return std::cout << kUsage, 0;
+    if (opt.is("--duration")) duration = opt.number();
+    else if (opt.is("--map-until")) map_until = opt.number();
+    else if (opt.is("--cache")) cache = opt.value();
+    else if (opt.is("--json")) json_out = opt.value();
+    else if (opt.is("--timing-only")) timing_only = true;
+    else return opt.unknown();
   }
   if (!(duration > map_until + 5) || !(map_until > 5))
     return std::fprintf(stderr, "hermes_bench_mapuse: need 5 < --map-until < --duration - 5\n"), 2;

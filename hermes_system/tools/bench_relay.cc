@@ -24,6 +24,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench_args.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/offline_run.h"
@@ -111,33 +112,25 @@ int main(int argc, char** argv) {
   std::string scenario = std::string(HERMES_SOURCE_DIR) + "/config/scenarios/relay_outdoor/scenario.txt";
   std::string json_out;
   std::vector<std::string> sets;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "hermes_bench_relay: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--help" || a == "-h") {
+  hermes::system::bench::Options opt(argc, argv, "hermes_bench_relay");
+  while (opt.next()) {
+    if (opt.is("--help") || opt.is("-h")) {
       std::printf("%s", kUsage);
       return 0;
-    } else if (a == "--duration") {
-      duration = std::atof(next().c_str());
-    } else if (a == "--data") {
-      data = next();
-    } else if (a == "--cache") {
-      cache = next();
-    } else if (a == "--scenario") {
-      scenario = next();
-    } else if (a == "--set") {
-      sets.push_back(next());
-    } else if (a == "--json") {
-      json_out = next();
+    } else if (opt.is("--duration")) {
+      duration = opt.number(1e-3, 60);
+    } else if (opt.is("--data")) {
+      data = opt.value();
+    } else if (opt.is("--cache")) {
+      cache = opt.value();
+    } else if (opt.is("--scenario")) {
+      scenario = opt.value();
+    } else if (opt.is("--set")) {
+      sets.push_back(opt.value());
+    } else if (opt.is("--json")) {
+      json_out = opt.value();
     } else {
-      std::fprintf(stderr, "hermes_bench_relay: unknown option '%s' (see --help)\n", a.c_str());
-      return 2;
+      return opt.unknown();
     }
   }
   if (!(duration > 0 && duration <= 60))

@@ -132,55 +132,47 @@ int main(int argc, char** argv) {
   double bandwidth = 10, server_restart_at = 90, health_period = 30;
   bool crash_sortie_live = false;
   std::vector<std::string> overrides;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "hermes_bench_soak: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--help" || a == "-h") {
+  hermes::system::bench::Options opt(argc, argv, "hermes_bench_soak");
+  while (opt.next()) {
+    if (opt.is("--help") || opt.is("-h")) {
       std::cout << kUsage;
       return 0;
-    } else if (a == "--robots") {
-      plan.robots = std::atoi(next().c_str());
-    } else if (a == "--duration") {
-      plan.duration_s = std::atof(next().c_str());
-    } else if (a == "--waves") {
-      plan.waves = std::atoi(next().c_str());
-    } else if (a == "--sorties") {
-      plan.sorties = std::atoi(next().c_str());
-    } else if (a == "--stagger") {
-      plan.stagger_s = std::atof(next().c_str());
-    } else if (a == "--sequences") {
-      plan.sequences = split(next());
-    } else if (a == "--data") {
-      data = next();
-    } else if (a == "--tracking-dir") {
-      tracking_dir = next();
-    } else if (a == "--bandwidth") {
-      bandwidth = std::atof(next().c_str());
-    } else if (a == "--trace") {
-      trace = next();
-    } else if (a == "--server-restart-at") {
-      server_restart_at = std::atof(next().c_str());
-    } else if (a == "--robot-restart") {
-      robot_restart = next();
-    } else if (a == "--crash-sortie-live") {
+    } else if (opt.is("--robots")) {
+      plan.robots = opt.whole(1, 1000);
+    } else if (opt.is("--duration")) {
+      plan.duration_s = opt.number(1);
+    } else if (opt.is("--waves")) {
+      plan.waves = opt.whole(1, 1000);
+    } else if (opt.is("--sorties")) {
+      plan.sorties = opt.whole(1, 1000);
+    } else if (opt.is("--stagger")) {
+      plan.stagger_s = opt.number(0);
+    } else if (opt.is("--sequences")) {
+      plan.sequences = split(opt.value());
+    } else if (opt.is("--data")) {
+      data = opt.value();
+    } else if (opt.is("--tracking-dir")) {
+      tracking_dir = opt.value();
+    } else if (opt.is("--bandwidth")) {
+      bandwidth = opt.number(1e-3);
+    } else if (opt.is("--trace")) {
+      trace = opt.value();
+    } else if (opt.is("--server-restart-at")) {
+      server_restart_at = opt.number();
+    } else if (opt.is("--robot-restart")) {
+      robot_restart = opt.value();
+    } else if (opt.is("--crash-sortie-live")) {
       crash_sortie_live = true;
-    } else if (a == "--health-period") {
-      health_period = std::atof(next().c_str());
-    } else if (a == "--set") {
-      overrides.push_back(next());
-    } else if (a == "--out") {
-      out = next();
-    } else if (a == "--json") {
-      json_out = next();
+    } else if (opt.is("--health-period")) {
+      health_period = opt.number(1e-3);
+    } else if (opt.is("--set")) {
+      overrides.push_back(opt.value());
+    } else if (opt.is("--out")) {
+      out = opt.value();
+    } else if (opt.is("--json")) {
+      json_out = opt.value();
     } else {
-      std::fprintf(stderr, "hermes_bench_soak: unknown option '%s'\n%s", a.c_str(), kUsage);
-      return 2;
+      return opt.unknown();
     }
   }
   if (out.empty()) return std::fprintf(stderr, "hermes_bench_soak: --out DIR is required\n%s", kUsage), 2;

@@ -487,63 +487,50 @@ int main(int argc, char** argv) {
   bool variants_given = false, bandwidths_given = false, duration_given = false;
   bool live_tracking = false;
   std::string tracking_dir;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "hermes_bench_system: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--help" || a == "-h") {
+  hermes::system::bench::Options opt(argc, argv, "hermes_bench_system");
+  while (opt.next()) {
+    if (opt.is("--help") || opt.is("-h")) {
       std::cout << kUsage;
       return 0;
-    } else if (a == "--duration") {
-      duration = std::atof(next().c_str());
+    } else if (opt.is("--duration")) {
+      duration = opt.number(1e-3);
       duration_given = true;
-    } else if (a == "--rate") {
-      rate = std::atof(next().c_str());
-    } else if (a == "--cache") {
-      cache = next();
-    } else if (a == "--bandwidths") {
-      bandwidths = split(next());
+    } else if (opt.is("--rate")) {
+      rate = opt.number(1e-3);
+    } else if (opt.is("--cache")) {
+      cache = opt.value();
+    } else if (opt.is("--bandwidths")) {
+      bandwidths = split(opt.value());
       bandwidths_given = true;
-    } else if (a == "--variants") {
-      variants = split(next());
+    } else if (opt.is("--variants")) {
+      variants = split(opt.value());
       variants_given = true;
-    } else if (a == "--swarm") {
-      swarm = split(next());
-    } else if (a == "--swarm-bandwidth") {
-      swarm_bw = next();
-    } else if (a == "--run-out") {
-      run_out = next();
-    } else if (a == "--swarm-data") {
-      swarm_data = next();
-    } else if (a == "--swarm-first") {
-      const std::string v = next();
-      char* end = nullptr;
-      swarm_first = static_cast<int>(std::strtol(v.c_str(), &end, 10));
-      if (end == v.c_str() || *end != '\0' || swarm_first < 0)
-        return std::fprintf(stderr, "hermes_bench_system: --swarm-first needs whole seconds >= 0 (got '%s')\n",
-                            v.c_str()), 2;
-    } else if (a == "--swarm-sequences") {
-      swarm_seqs = split(next());
-    } else if (a == "--full") {
-      full = next();
-    } else if (a == "--out") {
-      full_out = next();
-    } else if (a == "--live-tracking") {
+    } else if (opt.is("--swarm")) {
+      swarm = split(opt.value());
+    } else if (opt.is("--swarm-bandwidth")) {
+      swarm_bw = opt.value();
+    } else if (opt.is("--run-out")) {
+      run_out = opt.value();
+    } else if (opt.is("--swarm-data")) {
+      swarm_data = opt.value();
+    } else if (opt.is("--swarm-first")) {
+      swarm_first = opt.whole(0, 1000);
+    } else if (opt.is("--swarm-sequences")) {
+      swarm_seqs = split(opt.value());
+    } else if (opt.is("--full")) {
+      full = opt.value();
+    } else if (opt.is("--out")) {
+      full_out = opt.value();
+    } else if (opt.is("--live-tracking")) {
       live_tracking = true;
-    } else if (a == "--tracking-dir") {
-      tracking_dir = next();
-    } else if (a == "--set") {
-      overrides.push_back(next());
-    } else if (a == "--json") {
-      json_out = next();
+    } else if (opt.is("--tracking-dir")) {
+      tracking_dir = opt.value();
+    } else if (opt.is("--set")) {
+      overrides.push_back(opt.value());
+    } else if (opt.is("--json")) {
+      json_out = opt.value();
     } else {
-      std::fprintf(stderr, "hermes_bench_system: unknown argument '%s' (see --help)\n", a.c_str());
-      return 2;
+      return opt.unknown();
     }
   }
   if (!(duration > 0) || !(rate > 0)) {
