@@ -72,8 +72,9 @@ const char* kUsage =
     "                   flies --duration s of sequence k mod S (of --swarm-sequences) from\n"
     "                   start F + 20 * (k / S) s: time windows of whole-sequence renders in\n"
     "                   one hall; variants default to hermes,raw\n"
-    "  --swarm-first F  first start [s] (default 0; at 0 five robots fly the first 15 s\n"
-    "                   of MH_01-05, which barely see each other; from 20 s they meet)\n"
+    "  --swarm-first F  first start [s] (default 20: the robots fly and meet there; at 0\n"
+    "                   five robots fly the first 15 s of MH_01-05, which barely see each\n"
+    "                   other; with 20, MH_04's 98 s hold 20 robots)\n"
     "  --swarm-bandwidth M  shared link of the swarm sweep [Mbit/s] (default 50)\n"
     "  --swarm-data DIR     whole-sequence renders (default data_cache/mh_full; rendered\n"
     "                   from ../shared/data/euroc_gt, else config/trajectories, when missing)\n"
@@ -479,7 +480,7 @@ int main(int argc, char** argv) {
   std::string swarm_bw = "50";
   std::string run_out;
   std::string swarm_data = std::string(HERMES_SOURCE_DIR) + "/data_cache/mh_full";
-  int swarm_first = 0;
+  int swarm_first = 20;
   std::vector<std::string> swarm_seqs =
       split(hermes::system::bench::kMachineHall);
   std::vector<std::string> overrides;

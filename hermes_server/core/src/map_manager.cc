@@ -33,6 +33,8 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
                    IntKey{"duplicate_neighbours", &duplicate_neighbours},
                    IntKey{"duplicate_min_pair_loops", &duplicate_min_pair_loops},
                    IntKey{"closure_budget", &closure_budget},
+                   IntKey{"closure_budget_swarm", &closure_budget_swarm},
+                   IntKey{"closure_budget_min_robots", &closure_budget_min_robots},
                    IntKey{"timing_window", &timing_window},
                    IntKey{"deferred_closures", &deferred_closures},
                    IntKey{"sparse_pair_loops", &sparse_pair_loops}})
@@ -40,7 +42,8 @@ Status MapManagerParams::read(const Config& config, const std::string& prefix) {
       if (Status s = config.get(p + k.name, k.v); !s) return s;
   for (auto [name, v] : {std::pair<const char*, double*>{"spatial_radius_m", &spatial_radius_m},
                          {"spatial_max_angle_deg", &spatial_max_angle_deg},
-                         {"sparse_pair_sigma_m", &sparse_pair_sigma_m}})
+                         {"sparse_pair_sigma_m", &sparse_pair_sigma_m},
+                         {"active_robot_s", &active_robot_s}})
     if (config.has(p + name))
       if (Status s = config.get(p + name, v); !s) return s;
   if (Status s = odometry.read(config); !s) return s;
@@ -66,6 +69,9 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   out.set(p + "duplicate_neighbours", duplicate_neighbours);
   out.set(p + "duplicate_min_pair_loops", duplicate_min_pair_loops);
   out.set(p + "closure_budget", closure_budget);
+  out.set(p + "closure_budget_swarm", closure_budget_swarm);
+  out.set(p + "closure_budget_min_robots", closure_budget_min_robots);
+  out.set(p + "active_robot_s", active_robot_s);
   out.set(p + "timing_window", timing_window);
   out.set(p + "deferred_closures", deferred_closures);
   out.set(p + "sparse_pair_loops", sparse_pair_loops);
@@ -87,6 +93,9 @@ Status MapManagerParams::validate() const {
   if (duplicate_neighbours < 0) return Error{"duplicate_neighbours must be >= 0"};
   if (duplicate_min_pair_loops < 0) return Error{"duplicate_min_pair_loops must be >= 0"};
   if (closure_budget < 0) return Error{"closure_budget must be >= 0 (0 = verify all)"};
+  if (closure_budget_swarm < 0) return Error{"closure_budget_swarm must be >= 0 (0 = off)"};
+  if (closure_budget_min_robots < 1) return Error{"closure_budget_min_robots must be >= 1"};
+  if (!(active_robot_s > 0) || !std::isfinite(active_robot_s)) return Error{"active_robot_s must be > 0"};
   if (timing_window < 0) return Error{"timing_window must be >= 0 (0 = keep all)"};
   if (deferred_closures < 0) return Error{"deferred_closures must be >= 0"};
   if (sparse_pair_loops < 0) return Error{"sparse_pair_loops must be >= 0 (0 = off)"};
@@ -113,7 +122,8 @@ MapManager::MapManager(std::shared_ptr<const Vocabulary> vocabulary, MapManagerP
       recognizer_(vocabulary_, params_.place_recognition),
       closer_(params_.loop_closure),
       sparse_closer_(sparseGate(params_)),
-      timings_(static_cast<std::size_t>(params_.timing_window)) {}
+      timings_(static_cast<std::size_t>(params_.timing_window)),
+      closure_budget_(params_.closure_budget) {}
 
 Mat6 MapManager::bridgeInformation(const Keyframe& from, const Keyframe& to) const {
   return odometryInformation(from.T_A_C.inverse() * to.T_A_C, -1, to.lost_before, params_.odometry);
@@ -214,7 +224,7 @@ void MapManager::extendKeyframes(const std::vector<KeyframeKey>& extended, Merge
       again.push_back(loop.id);
       pairs.emplace_back(loop.a, loop.b);
     }
-  if (params_.closure_budget > 0) {  // under a budget: measured again while no submap waits
+  if (closure_budget_ > 0) {  // under a budget: measured again while no submap waits
     std::set<std::uint64_t> waiting;
     for (const LoopJob& j : deferred_)
       if (j.reverify) waiting.insert(*j.reverify);

@@ -160,7 +160,7 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
   };
   std::map<TrajPair, int> pair_loops;
   const std::vector<char> within = closuresWithinBudget(jobs, dups);
-  int budget_left = params_.closure_budget;
+  int budget_left = closure_budget_;
   for (int round = 0; round < 2; ++round) {
     if (round == 1)
       for (std::size_t i = 0; i < jobs.size(); ++i)
@@ -169,7 +169,7 @@ void MapManager::detectLoops(const std::vector<KeyframeKey>& added, MergeStats* 
     std::vector<std::pair<KeyframeKey, KeyframeKey>> pairs;
     for (std::size_t i = 0; i < jobs.size(); ++i) {
       if (!jobs[i].candidate || dups[i].empty() != (round == 0)) continue;
-      if (!within[i] || (params_.closure_budget > 0 && budget_left <= 0)) {
+      if (!within[i] || (closure_budget_ > 0 && budget_left <= 0)) {
         skipped[i] = 2;
         continue;
       }
@@ -278,7 +278,7 @@ Expected<int> MapManager::closeDeferred(int max_closures, const std::function<do
 std::vector<char> MapManager::closuresWithinBudget(const std::vector<LoopJob>& jobs,
                                                    const std::vector<std::vector<std::size_t>>& dups) const {
   std::vector<char> within(jobs.size(), 1);
-  if (params_.closure_budget <= 0) return within;
+  if (closure_budget_ <= 0) return within;
   const std::map<TrajectoryPair, int> accepted = acceptedLoopsPerPair(map_.loops);
   // The first round is chosen; a near-duplicate follows the closures it duplicates.
   std::vector<std::size_t> first;
@@ -288,7 +288,7 @@ std::vector<char> MapManager::closuresWithinBudget(const std::vector<LoopJob>& j
     first.push_back(i);
     pairs.push_back(pairOf(jobs[i].query, jobs[i].candidate->key));
   }
-  const std::vector<char> chosen = chooseWithinBudget(pairs, accepted, params_.closure_budget);
+  const std::vector<char> chosen = chooseWithinBudget(pairs, accepted, closure_budget_);
   for (std::size_t k = 0; k < first.size(); ++k) within[first[k]] = chosen[k];
   for (std::size_t i = 0; i < jobs.size(); ++i)
     if (!dups[i].empty())

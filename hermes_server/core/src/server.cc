@@ -180,6 +180,8 @@ int Server::process(double now, int max_submaps) {
     }
     if (!next) continue;
     const ReceivedSubmap& r = *next;
+    map_.setClosureBudget(closureBudget(r.robot, now));
+    last_merge_s_[r.robot] = now;
     auto stats = guarded("merge of robot " + std::to_string(r.robot) + " session " +
                              std::to_string(r.submap.header.session) + " seq " + std::to_string(r.submap.header.seq),
                          [&] { return map_.merge(r.robot, r.submap, credibility); });  // without the intake lock
@@ -209,10 +211,12 @@ int Server::process(double now, int max_submaps) {
   // waits (closure_budget.h): a submap never waits behind them.
   if (drained && !full_solves_external_ && map_.fullSolveDue()) {
     solveFullInline();
-  } else if (drained && params_.map.closure_budget > 0 && map_.deferredClosures() > 0) {
+  } else if (drained && map_.deferredClosures() > 0) {
+    // A slice as large as a merge's budget (all of them without one).
+    const int slice = map_.closureBudget() > 0 ? map_.closureBudget() : static_cast<int>(map_.deferredClosures());
     MergeStats stats;
     auto closed = guarded("deferred loop closures",
-                          [&] { return map_.closeDeferred(params_.map.closure_budget, credibility, &stats); });
+                          [&] { return map_.closeDeferred(slice, credibility, &stats); });
     counters_.loops_reverified += static_cast<std::size_t>(stats.loops_reverified);
     if (!closed) {
       ++counters_.merge_errors;
@@ -223,6 +227,16 @@ int Server::process(double now, int max_submaps) {
   if (popped > 0 && store_ && now - last_checkpoint_ >= params_.checkpoint.period_s)
     (void)checkpoint(now);  // counted and kept in durability(); the journal still holds everything
   return merged;
+}
+
+int Server::closureBudget(RobotId robot, double now) const {
+  const MapManagerParams& p = params_.map;
+  if (p.closure_budget > 0 || p.closure_budget_swarm <= 0) return p.closure_budget;
+  int active = 1;  // the merging robot
+  for (const auto& [r, t] : last_merge_s_)
+    if (r != robot && now - t <= p.active_robot_s) ++active;
+  if (active < p.closure_budget_min_robots) return 0;
+  return (p.closure_budget_swarm + active - 1) / active;
 }
 
 void Server::solveFullInline() {

@@ -38,11 +38,14 @@ int position(const GlobalMap& map, const KeyframeKey& k) {
   return it == t->keyframes.end() ? -1 : static_cast<int>(std::distance(t->keyframes.begin(), it));
 }
 
-Trace run(const fixture::Fixture& fx, int duplicate_neighbours, int min_pair_loops = 0, int budget = 0) {
+Trace run(const fixture::Fixture& fx, int duplicate_neighbours, int min_pair_loops = 0, int budget = 0,
+          int swarm_budget = 0) {
   ServerParams params;
   params.map.duplicate_neighbours = duplicate_neighbours;
   params.map.duplicate_min_pair_loops = min_pair_loops;
   params.map.closure_budget = budget;
+  params.map.closure_budget_swarm = swarm_budget;
+  params.map.closure_budget_min_robots = 1;  // the fixture's two robots share it
   auto created = Server::create(params, HERMES_SOURCE_DIR);
   EXPECT_TRUE(created.ok()) << created.error();
   Server& server = **created;
@@ -94,6 +97,7 @@ class DuplicateClosures : public ::testing::Test {
     on_ = new Trace(run(*fx, 2));
     sparse_ = new Trace(run(*fx, 2, 1000));
     budget_ = new Trace(run(*fx, 2, 6, kBudget));
+    swarm_ = new Trace(run(*fx, 2, 6, 0, 2 * kBudget));
   }
   static void TearDownTestSuite() {
     delete fx_;
@@ -101,6 +105,7 @@ class DuplicateClosures : public ::testing::Test {
     delete on_;
     delete sparse_;
     delete budget_;
+    delete swarm_;
   }
   static constexpr int kBudget = 4;
   static fixture::Fixture* fx_;
@@ -108,12 +113,14 @@ class DuplicateClosures : public ::testing::Test {
   static Trace* on_;
   static Trace* sparse_;  ///< duplicate_min_pair_loops above any merge's loops
   static Trace* budget_;  ///< closure_budget kBudget
+  static Trace* swarm_;   ///< closure_budget_swarm 2 x kBudget: kBudget each once both robots merge
 };
 fixture::Fixture* DuplicateClosures::fx_ = nullptr;
 Trace* DuplicateClosures::off_ = nullptr;
 Trace* DuplicateClosures::on_ = nullptr;
 Trace* DuplicateClosures::sparse_ = nullptr;
 Trace* DuplicateClosures::budget_ = nullptr;
+Trace* DuplicateClosures::swarm_ = nullptr;
 
 TEST_F(DuplicateClosures, FewerClosuresVerifiedSameRobotsMerged) {
   ASSERT_TRUE(off_ && on_);
@@ -179,6 +186,32 @@ TEST_F(DuplicateClosures, TheBudgetCapsEveryMergeAndDefersTheRest) {
             << on_->accepted << " -> " << budget_->accepted << "\n";
 }
 
+// server.map.closure_budget_swarm: the swarm's closures per window shared among
+// the robots active. The first merge (one robot so far) gets all 2 x kBudget,
+// every merge after it kBudget (both robots merged within active_robot_s).
+TEST_F(DuplicateClosures, TheSwarmsBudgetIsSharedAmongTheRobotsActive) {
+  ASSERT_TRUE(on_ && swarm_);
+  std::map<KeyframeKey, std::size_t> first_seen;
+  std::map<std::size_t, int> own;  // verified in their own merge, per merge
+  int over_budget = 0;
+  for (const Seen& s : swarm_->attempts) {
+    first_seen.emplace(s.query, s.merge);
+    if (s.status == LoopStatus::kSkippedBudget) ++over_budget;
+    else if (s.status != LoopStatus::kSkippedDuplicate && first_seen[s.query] == s.merge) ++own[s.merge];
+  }
+  int above_share = 0;
+  for (const auto& [merge, n] : own) {
+    EXPECT_LE(n, 2 * kBudget) << "merge " << merge;
+    above_share += n > kBudget;
+  }
+  EXPECT_LE(above_share, 1) << "only the first robot's first merge, alone, may verify more than kBudget";
+  EXPECT_GT(over_budget, 0);
+  EXPECT_EQ(swarm_->merged, 2);
+  EXPECT_GE(double(swarm_->accepted), 0.9 * double(on_->accepted));
+  std::cout << "[ info ] swarm budget " << 2 * kBudget << " over 2 robots: " << over_budget
+            << " deferred, loops accepted " << on_->accepted << " -> " << swarm_->accepted << "\n";
+}
+
 // A checkpoint holds the closures the budget deferred: a server restored from
 // it verifies them and ends with the loops of the one that never stopped.
 TEST_F(DuplicateClosures, DeferredClosuresSurviveACheckpoint) {
@@ -227,6 +260,15 @@ TEST(DuplicateClosuresParams, NegativeIsRejected) {
   p.closure_budget = -1;
   EXPECT_FALSE(p.validate().ok());
   p.closure_budget = 0;
+  p.closure_budget_swarm = -1;
+  EXPECT_FALSE(p.validate().ok());
+  p.closure_budget_swarm = 0;
+  p.active_robot_s = 0;
+  EXPECT_FALSE(p.validate().ok());
+  p.active_robot_s = 15;
+  p.closure_budget_min_robots = 0;
+  EXPECT_FALSE(p.validate().ok());
+  p.closure_budget_min_robots = 9;
   p.deferred_closures = -1;
   EXPECT_FALSE(p.validate().ok());
 }

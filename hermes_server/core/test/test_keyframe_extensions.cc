@@ -60,6 +60,7 @@ TEST_P(KeyframeExtensions, AppendKeypointsToStoredKeyframesAndReverifyTheirLoops
   ASSERT_TRUE(fx.ok()) << fx.error();
   ServerParams params;
   params.map.closure_budget = GetParam();
+  params.map.closure_budget_swarm = 0;  // 0 = the merge measures them again itself
   auto created = Server::create(params, HERMES_SOURCE_DIR);
   ASSERT_TRUE(created.ok()) << created.error();
   Server& server = **created;

@@ -39,6 +39,7 @@ std::unique_ptr<Server> makeServer(const std::string& checkpoint_dir = "", int c
   params.map.pose_graph.full_every = full_every;
   params.checkpoint.dir = checkpoint_dir;
   params.map.closure_budget = closure_budget;
+  params.map.closure_budget_swarm = 0;  // a fixed budget or none: the same in both modes whatever the clock
   auto server = Server::create(params, HERMES_SOURCE_DIR);
   EXPECT_TRUE(server.ok()) << (server ? "" : server.error());
   return server ? std::move(*server) : nullptr;

@@ -196,6 +196,9 @@ class Server {
   std::vector<std::uint8_t> encodeState(std::vector<SubmapHeader>* covers);
   /// The intake state's parts of the body, before and after the map.
   void saveIntake(ByteWriter* head, ByteWriter* tail) const;
+  /// The closure budget of a merge of `robot` at `now` (map.closure_budget, or
+  /// the swarm's share, map.closure_budget_swarm, among the robots active).
+  int closureBudget(RobotId robot, double now) const;
   /// Keeps m among slowest_ when it is one of the kSlowestMerges slowest.
   void noteSlowMerge(MergeBreakdown m);
   /// head + the map (read by the merging thread, no lock) + tail.
@@ -213,6 +216,7 @@ class Server {
   ServerCounters counters_;
   TimingStats timings_;
   std::vector<MergeBreakdown> slowest_;
+  std::map<RobotId, double> last_merge_s_;  ///< per robot, when its last submap was merged (closureBudget())
   std::optional<CheckpointStore> store_;
   std::vector<SubmapHeader> journaled_;  ///< journal entries no checkpoint covers yet
   std::deque<std::vector<SubmapHeader>> covered_;  ///< entries first covered by each newer checkpoint
