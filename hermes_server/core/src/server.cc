@@ -212,8 +212,13 @@ int Server::process(double now, int max_submaps) {
   if (drained && !full_solves_external_ && map_.fullSolveDue()) {
     solveFullInline();
   } else if (drained && map_.deferredClosures() > 0) {
-    // A slice as large as a merge's budget (all of them without one).
-    const int slice = map_.closureBudget() > 0 ? map_.closureBudget() : static_cast<int>(map_.deferredClosures());
+    // A slice as large as a merge's budget; once the swarm has shrunk below the
+    // share, as large as the largest share (a submap arriving meanwhile waits
+    // for one slice, never for all that is left).
+    const MapManagerParams& p = params_.map;
+    const int largest_share = (p.closure_budget_swarm + p.closure_budget_min_robots - 1) / p.closure_budget_min_robots;
+    int slice = map_.closureBudget() > 0 ? map_.closureBudget() : largest_share;
+    if (slice <= 0) slice = static_cast<int>(map_.deferredClosures());  // no budget of any kind: all
     MergeStats stats;
     auto closed = guarded("deferred loop closures",
                           [&] { return map_.closeDeferred(slice, credibility, &stats); });
