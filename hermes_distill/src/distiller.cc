@@ -102,8 +102,8 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   // (DistillParams::trouble_*); raw streaming keeps everything anyway.
   rep.trouble = params_.strategy != "none" && inTrouble(window, hint.health, params_);
   DistillParams window_params = params_;
-  // A fast window keeps more keyframes, from the budget's surplus only (planDistillation).
-  const int motion_cap = budgeted ? motionKeyframeCap(window, params_) : 0;
+  // A fast window (or one whose view changes fast) keeps more keyframes, from the budget's surplus only (planDistillation).
+  const int surplus_cap = budgeted ? surplusKeyframeCap(window, params_) : 0;
   CoordinatorInput link = input;
   if (rep.trouble) {
     window_params.max_keyframes = params_.trouble_max_keyframes;
@@ -164,7 +164,7 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   int n_kf = std::min<int>(prm.max_keyframes, static_cast<int>(window.keyframes.size()));
   int k = prm.fixed_k;
   if (budgeted) {
-    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, kept_, prm, motion_cap);
+    const CoordinatorPlan plan = planDistillation(window, rep.budget_bytes, model_, kept_, prm, surplus_cap);
     if (plan.defer) {
       rep.deferred = true;
       rep.defer_reason = plan.reason;

@@ -262,9 +262,13 @@ double windowMotion(const Submap& w, const DistillParams& params) {
   return m;
 }
 
-int motionKeyframeCap(const Submap& w, const DistillParams& params) {
-  if (!(params.motion_keyframe_spacing > 0)) return params.max_keyframes;
-  const double n = std::ceil(windowMotion(w, params) / params.motion_keyframe_spacing);
+int surplusKeyframeCap(const Submap& w, const DistillParams& params) {
+  double n = 0;
+  if (params.motion_keyframe_spacing > 0)
+    n = std::ceil(windowMotion(w, params) / params.motion_keyframe_spacing);
+  if (params.tracked_keyframe_fraction > 0)
+    n = std::max(n, std::ceil(params.tracked_keyframe_fraction *
+                              static_cast<double>(w.keyframes.size()) - 1e-9));
   return static_cast<int>(std::clamp<double>(n, params.max_keyframes, params.trouble_max_keyframes));
 }
 

@@ -84,6 +84,7 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("trouble_max_keyframes", trouble_max_keyframes)
   HERMES_READ("trouble_budget_gain", trouble_budget_gain)
   HERMES_READ("motion_keyframe_spacing", motion_keyframe_spacing)
+  HERMES_READ("tracked_keyframe_fraction", tracked_keyframe_fraction)
   HERMES_READ("bytes_c0", bytes_c0)
   HERMES_READ("bytes_kf", bytes_kf)
   HERMES_READ("bytes_obs", bytes_obs)
@@ -112,6 +113,8 @@ Status DistillParams::validate() const {
   if (trouble_weak_frames < 1) return bad("trouble_weak_frames must be >= 1");
   if (!(motion_keyframe_spacing >= 0) || !std::isfinite(motion_keyframe_spacing))
     return bad("motion_keyframe_spacing must be >= 0 (0 = off)");
+  if (!(tracked_keyframe_fraction >= 0 && tracked_keyframe_fraction <= 1))
+    return bad("tracked_keyframe_fraction must be in [0, 1] (0 = off)");
   if (trouble_max_keyframes < max_keyframes)
     return bad("trouble_max_keyframes must be >= max_keyframes");
   if (!(trouble_budget_gain >= 1)) return bad("trouble_budget_gain must be >= 1");
@@ -175,6 +178,7 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "trouble_max_keyframes", trouble_max_keyframes);
   out->set(p + "trouble_budget_gain", trouble_budget_gain);
   out->set(p + "motion_keyframe_spacing", motion_keyframe_spacing);
+  out->set(p + "tracked_keyframe_fraction", tracked_keyframe_fraction);
   out->set(p + "trim_w_rot", trim_w_rot);
   out->set(p + "trim_w_trans", trim_w_trans);
   out->set(p + "trim_lambda", trim_lambda);

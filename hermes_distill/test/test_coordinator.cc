@@ -143,7 +143,7 @@ TEST(Coordinator, ShrinksToFitTheBudget) {
     EXPECT_LE(static_cast<double>(r.report.bytes_actual), r.report.budget_bytes);
     EXPECT_EQ(r.report.bytes_actual, referenceEncodedSize(r.submap));
     EXPECT_EQ(r.submap.validate(), "");
-    EXPECT_LE(r.report.n_kf, motionKeyframeCap(w.submap, p));
+    EXPECT_LE(r.report.n_kf, surplusKeyframeCap(w.submap, p));
     EXPECT_GT(r.report.n_lm, 0);
     EXPECT_EQ(r.submap.odometry.size(), r.submap.keyframes.size() - 1);
     // Budget-bound instances can be hard for CBC: then the incumbent at the time
@@ -247,7 +247,8 @@ TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
   ASSERT_TRUE(w.ok()) << w.error();
   ASSERT_GE(w->submap.keyframes.size(), 20u);
   DistillParams p;
-  p.motion_keyframe_spacing = 0;  // no motion cap: compared with max_keyframes
+  p.motion_keyframe_spacing = 0;  // no surplus cap: compared with max_keyframes
+  p.tracked_keyframe_fraction = 0;
   auto run = [&](const DistillParams& params, bool placed) {
     CoordinatorInput in;
     in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
@@ -270,42 +271,50 @@ TEST(Coordinator, ARobotNotYetInTheGlobalMapKeepsMoreKeyframes) {
   EXPECT_LE(run(off, false).n_kf, p.max_keyframes);
 }
 
-// A sound, placed window that moves far keeps up to one keyframe per
-// motion_keyframe_spacing of motion (the fast robots' keyframes are where raw
-// streaming found its extra loops), from the budget's surplus only: on a tight
+// A sound, placed window that moves far (or whose tracker made many keyframes)
+// keeps up to one keyframe per motion_keyframe_spacing of motion (or
+// tracked_keyframe_fraction of its keyframes; the fast robots' keyframes are where
+// raw streaming found its extra loops), from the budget's surplus only: on a tight
 // link the extra keyframes would take landmarks from the others.
 TEST(Coordinator, AFastWindowKeepsKeyframesForItsMotionFromTheSurplusOnly) {
   const Expected<SyntheticWindow> w = fastWindow();
   ASSERT_TRUE(w.ok()) << w.error();
-  DistillParams p;
-  p.tight_strategy = "same";  // the plans of one selector
-  p.solver_limits = "work";   // plans compared across runs, also on a loaded machine
-  p.motion_keyframe_spacing = windowMotion(w->submap, p) / 20;  // room for 20 keyframes
-  ASSERT_EQ(motionKeyframeCap(w->submap, p), 20);
-  DistillParams off = p;
-  off.motion_keyframe_spacing = 0;
-  auto run = [&](const DistillParams& params, double share_of_raw) {
-    CoordinatorInput in;
-    in.bandwidth_Bps = share_of_raw * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
-    return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
-  };
-  // A link with room: more keyframes, each at k_max, within the budget.
-  const DistillReport fast = run(p, 2.0), capped = run(off, 2.0);
-  ASSERT_FALSE(fast.deferred || capped.deferred);
-  EXPECT_LE(capped.n_kf, p.max_keyframes);
-  EXPECT_GT(fast.n_kf, p.max_keyframes);
-  EXPECT_LE(fast.n_kf, motionKeyframeCap(w->submap, p));
-  EXPECT_EQ(fast.k, p.k_max);
-  EXPECT_DOUBLE_EQ(fast.budget_bytes, capped.budget_bytes);
-  EXPECT_LE(static_cast<double>(fast.bytes_actual), fast.budget_bytes);
-  // A tight link (K below k_max without the cap): the same plan as without it.
-  double share = 0.5;
-  while (share > 0.01 && run(off, share).k >= p.k_max) share *= 0.7;
-  const DistillReport tight = run(p, share), tight_off = run(off, share);
-  ASSERT_FALSE(tight.deferred || tight_off.deferred) << share;
-  EXPECT_EQ(tight.n_kf, tight_off.n_kf);
-  EXPECT_EQ(tight.k, tight_off.k);
-  EXPECT_LT(tight.k, p.k_max);
+  ASSERT_GE(w->submap.keyframes.size(), 20u);
+  DistillParams base;
+  base.tight_strategy = "same";  // the plans of one selector
+  base.solver_limits = "work";   // plans compared across runs, also on a loaded machine
+  base.motion_keyframe_spacing = 0;
+  base.tracked_keyframe_fraction = 0;
+  DistillParams by_motion = base, by_tracked = base;
+  by_motion.motion_keyframe_spacing = windowMotion(w->submap, base) / 20;  // room for 20 keyframes
+  by_tracked.tracked_keyframe_fraction = 20.0 / static_cast<double>(w->submap.keyframes.size());
+  for (const DistillParams& p : {by_motion, by_tracked}) {
+    SCOPED_TRACE(p.motion_keyframe_spacing > 0 ? "motion rule" : "tracked-fraction rule");
+    ASSERT_EQ(surplusKeyframeCap(w->submap, p), 20);
+    const DistillParams& off = base;
+    auto run = [&](const DistillParams& params, double share_of_raw) {
+      CoordinatorInput in;
+      in.bandwidth_Bps = share_of_raw * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
+      return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
+    };
+    // A link with room: more keyframes, each at k_max, within the budget.
+    const DistillReport fast = run(p, 2.0), capped = run(off, 2.0);
+    ASSERT_FALSE(fast.deferred || capped.deferred);
+    EXPECT_LE(capped.n_kf, p.max_keyframes);
+    EXPECT_GT(fast.n_kf, p.max_keyframes);
+    EXPECT_LE(fast.n_kf, surplusKeyframeCap(w->submap, p));
+    EXPECT_EQ(fast.k, p.k_max);
+    EXPECT_DOUBLE_EQ(fast.budget_bytes, capped.budget_bytes);
+    EXPECT_LE(static_cast<double>(fast.bytes_actual), fast.budget_bytes);
+    // A tight link (K below k_max without the cap): the same plan as without it.
+    double share = 0.5;
+    while (share > 0.01 && run(off, share).k >= p.k_max) share *= 0.7;
+    const DistillReport tight = run(p, share), tight_off = run(off, share);
+    ASSERT_FALSE(tight.deferred || tight_off.deferred) << share;
+    EXPECT_EQ(tight.n_kf, tight_off.n_kf);
+    EXPECT_EQ(tight.k, tight_off.k);
+    EXPECT_LT(tight.k, p.k_max);
+  }
 }
 
 TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
@@ -313,7 +322,8 @@ TEST(Coordinator, AWindowInTroubleKeepsMoreKeyframesAndPlansWithMoreOfTheLink) {
   ASSERT_TRUE(w.ok()) << w.error();
   ASSERT_GE(w->submap.keyframes.size(), 20u);
   DistillParams p;
-  p.motion_keyframe_spacing = 0;  // no motion cap: compared with max_keyframes
+  p.motion_keyframe_spacing = 0;  // no surplus cap: compared with max_keyframes
+  p.tracked_keyframe_fraction = 0;
   p.trouble_budget_gain = 1.5;  // borrowing (the default, 1, keeps the budget)
   CoordinatorInput in;
   in.bandwidth_Bps = 0.5 * referenceEncodedSize(w->submap) / (p.eta * p.window_s);

@@ -148,7 +148,7 @@ TEST(Trimming, SeparationIsTheDistanceToTheNearestOtherKeyframe) {
   EXPECT_NEAR(s[2], 4.0, 1e-12);
 }
 
-TEST(Trimming, MotionCapGrowsWithTheWindowsMotionWithinItsBounds) {
+TEST(Trimming, SurplusCapGrowsWithTheWindowsMotionOrItsTrackedKeyframesWithinItsBounds) {
   // 20 keyframes 0.25 m apart, turning 0.05 rad about z each step.
   auto window = [](double step_m) {
     Submap w;
@@ -165,11 +165,29 @@ TEST(Trimming, MotionCapGrowsWithTheWindowsMotionWithinItsBounds) {
   const double motion = 19 * (params.trim_w_trans * 0.25 + params.trim_w_rot * 0.05);
   EXPECT_NEAR(windowMotion(window(0.25), params), motion, 1e-9);
   params.motion_keyframe_spacing = 0;  // off
-  EXPECT_EQ(motionKeyframeCap(window(0.25), params), params.max_keyframes);
+  EXPECT_EQ(surplusKeyframeCap(window(0.25), params), params.max_keyframes);
   params.motion_keyframe_spacing = 1.0;
-  EXPECT_EQ(motionKeyframeCap(window(0.25), params), static_cast<int>(std::ceil(motion)));  // 15
-  EXPECT_EQ(motionKeyframeCap(window(0.0), params), params.max_keyframes);  // turning only: 6 -> floor
-  EXPECT_EQ(motionKeyframeCap(window(1.0), params), params.trouble_max_keyframes);  // 44 -> ceiling
+  EXPECT_EQ(surplusKeyframeCap(window(0.25), params), static_cast<int>(std::ceil(motion)));  // 15
+  EXPECT_EQ(surplusKeyframeCap(window(0.0), params), params.max_keyframes);  // turning only: 6 -> floor
+  EXPECT_EQ(surplusKeyframeCap(window(1.0), params), params.trouble_max_keyframes);  // 44 -> ceiling
+
+  // A view that changes fast for little motion (the tracker made 20 keyframes
+  // while the camera hardly moved): the tracked fraction sets the cap.
+  params.tracked_keyframe_fraction = 0.7;
+  EXPECT_EQ(surplusKeyframeCap(window(0.0), params), 14);                           // ceil(0.7 x 20)
+  EXPECT_EQ(surplusKeyframeCap(window(0.25), params), static_cast<int>(std::ceil(motion)));  // motion wins: 15
+  params.motion_keyframe_spacing = 0;
+  EXPECT_EQ(surplusKeyframeCap(window(0.25), params), 14);  // the fraction alone
+  params.tracked_keyframe_fraction = 0.5;
+  EXPECT_EQ(surplusKeyframeCap(window(0.0), params), params.max_keyframes);  // 10 -> floor
+  params.tracked_keyframe_fraction = 1.0;
+  EXPECT_EQ(surplusKeyframeCap(window(0.0), params), 20);
+  params.trouble_max_keyframes = 16;
+  EXPECT_EQ(surplusKeyframeCap(window(0.0), params), 16);  // -> ceiling
+  params.tracked_keyframe_fraction = 1.5;
+  EXPECT_FALSE(params.validate().ok());
+  params.tracked_keyframe_fraction = -0.1;
+  EXPECT_FALSE(params.validate().ok());
 }
 
 TEST(Trimming, AppliedTrimDropsOrphansAndAddsOdometry) {

@@ -121,7 +121,7 @@ CoordinatorPlan chooseK(const Submap& trimmed, double budget, const ByteModel& m
 /// at that N_KF; if even the floor cannot carry k_pref, the floor with the
 /// largest K down to k_min (against S itself when plan_fill · S is too little).
 /// Defers when nothing at or above the floor fits S.
-/// `surplus_max_keyframes` (a fast window's motionKeyframeCap): keyframes above
+/// `surplus_max_keyframes` (a fast window's surplusKeyframeCap): keyframes above
 /// max_keyframes, up to this many, are kept only from the budget's surplus, when
 /// every one of them still carries K = k_max within plan_fill · S; they never
 /// take landmarks from the others (whole MH at 0.5 Mbit/s: 2.70 -> 2.06 cm; at 2

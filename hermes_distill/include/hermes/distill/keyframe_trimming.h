@@ -39,10 +39,11 @@ std::vector<double> keyframeSeparation(const Submap& window, const DistillParams
 /// of trim_w_rot x angle + trim_w_trans x distance.
 double windowMotion(const Submap& window, const DistillParams& params);
 
-/// Keyframes a window may keep for its motion: ceil(windowMotion /
-/// motion_keyframe_spacing) clamped to [max_keyframes, trouble_max_keyframes];
-/// max_keyframes when the spacing is 0.
-int motionKeyframeCap(const Submap& window, const DistillParams& params);
+/// Keyframes a window may keep from the budget's surplus for how fast its view
+/// changes: the larger of ceil(windowMotion / motion_keyframe_spacing) and
+/// ceil(tracked_keyframe_fraction x its keyframes), clamped to [max_keyframes,
+/// trouble_max_keyframes]; a rule whose parameter is 0 is off.
+int surplusKeyframeCap(const Submap& window, const DistillParams& params);
 
 /// Number of landmarks keyframes a and b (indices) both observe.
 int sharedLandmarks(const Submap& window, std::size_t a, std::size_t b);

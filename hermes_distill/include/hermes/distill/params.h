@@ -143,7 +143,7 @@ struct DistillParams {
   // A window that moves far keeps up to one keyframe per motion_keyframe_spacing
   // of motion (the trimming's separation units: trim_w_trans per metre plus
   // trim_w_rot per radian, 1 = 0.5 m or ~10 deg), between max_keyframes and
-  // trouble_max_keyframes (motionKeyframeCap), with the coordinator on (fixed K
+  // trouble_max_keyframes (surplusKeyframeCap), with the coordinator on (fixed K
   // keeps max_keyframes). The fast robots' keyframes are
   // the ones raw streaming's extra loops stand on (whole MH, unlimited: 12
   // keyframes a window 0.74 cm / 40.7 MB, 1.5 -> 0.67 cm / 42.8 MB; 1.0 ->
@@ -151,6 +151,11 @@ struct DistillParams {
   // candidates per keyframe on the server: 10 Mbit/s 0.69 -> 0.65 cm, 42.3 ->
   // 44.6 MB (1.07x raw streaming at 32 % of its bytes; README sixteenth pass). 0 = off.
   double motion_keyframe_spacing = 1.25;
+  // ... and up to this fraction of the keyframes its tracker made (each one a
+  // view change the covisibility rule saw), in the same bounds and from the same
+  // surplus: near landmarks (a small room) change the view faster than the motion
+  // measure says. 0 = off.
+  double tracked_keyframe_fraction = 0.55;
 
   // Initial byte model.
   double bytes_c0 = 256;
