@@ -102,7 +102,8 @@ DistillResult Distiller::distill(const Submap& window, const MotionHint& hint,
   // (DistillParams::trouble_*); raw streaming keeps everything anyway.
   rep.trouble = params_.strategy != "none" && inTrouble(window, hint.health, params_);
   DistillParams window_params = params_;
-  // A fast window (or one whose view changes fast) keeps more keyframes, from the budget's surplus only (planDistillation).
+  // A window whose view changes fast (it moves far, or its tracker made many
+  // keyframes) keeps more keyframes, from the budget's surplus only (planDistillation).
   const int surplus_cap = budgeted ? surplusKeyframeCap(window, params_) : 0;
   CoordinatorInput link = input;
   if (rep.trouble) {

@@ -266,7 +266,7 @@ int surplusKeyframeCap(const Submap& w, const DistillParams& params) {
   double n = 0;
   if (params.motion_keyframe_spacing > 0)
     n = std::ceil(windowMotion(w, params) / params.motion_keyframe_spacing);
-  if (params.tracked_keyframe_fraction > 0)
+  if (params.tracked_keyframe_fraction > 0)  // (- 1e-9: 0.55 x 20 is 11.000000000000002)
     n = std::max(n, std::ceil(params.tracked_keyframe_fraction *
                               static_cast<double>(w.keyframes.size()) - 1e-9));
   return static_cast<int>(std::clamp<double>(n, params.max_keyframes, params.trouble_max_keyframes));

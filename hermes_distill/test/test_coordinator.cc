@@ -288,15 +288,15 @@ TEST(Coordinator, AFastWindowKeepsKeyframesForItsMotionFromTheSurplusOnly) {
   DistillParams by_motion = base, by_tracked = base;
   by_motion.motion_keyframe_spacing = windowMotion(w->submap, base) / 20;  // room for 20 keyframes
   by_tracked.tracked_keyframe_fraction = 20.0 / static_cast<double>(w->submap.keyframes.size());
+  const DistillParams& off = base;  // neither rule: max_keyframes
+  auto run = [&](const DistillParams& params, double share_of_raw) {
+    CoordinatorInput in;
+    in.bandwidth_Bps = share_of_raw * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
+    return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
+  };
   for (const DistillParams& p : {by_motion, by_tracked}) {
     SCOPED_TRACE(p.motion_keyframe_spacing > 0 ? "motion rule" : "tracked-fraction rule");
     ASSERT_EQ(surplusKeyframeCap(w->submap, p), 20);
-    const DistillParams& off = base;
-    auto run = [&](const DistillParams& params, double share_of_raw) {
-      CoordinatorInput in;
-      in.bandwidth_Bps = share_of_raw * referenceEncodedSize(w->submap) / (params.eta * params.window_s);
-      return Distiller(params, referenceEncodedSize).distill(w->submap, w->hint, in).report;
-    };
     // A link with room: more keyframes, each at k_max, within the budget.
     const DistillReport fast = run(p, 2.0), capped = run(off, 2.0);
     ASSERT_FALSE(fast.deferred || capped.deferred);

@@ -164,7 +164,8 @@ TEST(Trimming, SurplusCapGrowsWithTheWindowsMotionOrItsTrackedKeyframesWithinIts
   DistillParams params;  // w_trans 2 / m, w_rot 5.73 / rad
   const double motion = 19 * (params.trim_w_trans * 0.25 + params.trim_w_rot * 0.05);
   EXPECT_NEAR(windowMotion(window(0.25), params), motion, 1e-9);
-  params.motion_keyframe_spacing = 0;  // off
+  params.tracked_keyframe_fraction = 0;  // the motion rule alone first
+  params.motion_keyframe_spacing = 0;    // off
   EXPECT_EQ(surplusKeyframeCap(window(0.25), params), params.max_keyframes);
   params.motion_keyframe_spacing = 1.0;
   EXPECT_EQ(surplusKeyframeCap(window(0.25), params), static_cast<int>(std::ceil(motion)));  // 15
