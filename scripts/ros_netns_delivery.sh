@@ -67,6 +67,8 @@ command -v ip >/dev/null || skip "ip (iproute2) is not installed"
 command -v nft >/dev/null || skip "nft (nftables) is not installed"
 command -v roslaunch >/dev/null || skip "roslaunch is not installed (./hermes setup)"
 command -v roscore >/dev/null || skip "roscore is not installed (./hermes setup)"
+[[ -d "$BUILD" ]] || fail "--build $BUILD: no such folder"
+BUILD="$(cd "$BUILD" && pwd)"  # roslaunch runs its nodes elsewhere: an absolute path
 DATA="$BUILD/rostest_data/hall_d10_r10/MH_01_easy"
 [[ -f "$BUILD/devel/setup.bash" ]] || fail "$BUILD/devel/setup.bash not found: build the ROS tree first (./hermes build)"
 [[ -d "$DATA" ]] || fail "rendered data $DATA not found (build target hermes_tests_multi_agent_data)"
@@ -258,6 +260,7 @@ FIRST_DEADLINE=$(( $(date +%s) + 150 ))
 while (( $(date +%s) < FIRST_DEADLINE )); do
   [[ "$(agent_field "$CREATED")" =~ ^[1-9] ]] && break
   kill -0 "$G_AGENT1" 2>/dev/null || fail "agent run 1 exited: $(tail -5 "$LOGS/agent_run1.log")"
+  grep -q "FATAL" "$LOGS/agent_run1.log" && fail "agent run 1: $(grep -m2 FATAL "$LOGS/agent_run1.log")"
   sleep 0.2
 done
 [[ "$(agent_field "$CREATED")" =~ ^[1-9] ]] ||
@@ -285,6 +288,24 @@ for _ in $(seq 50); do [[ -z "$(alive $KILLED)" ]] && break; sleep 0.1; done
 [[ -z "$(alive $KILLED)" ]] || fail "agent processes $(alive $KILLED) survived SIGKILL"
 sleep "$RESTART_DELAY"
 launch_agent "run 2" "$LOGS/agent_run2.log" "$RESTART_CLEAR"; G_AGENT2=$G_AGENT
+# Run 2 counts from its first uplink_status. Its start goes through the lossy link
+# (~20 parameter reads, topic registrations, the master's publisherUpdate to the
+# monitor): run 1 needed 48 s to its first submap on a loaded CI machine, and one
+# CI run saw no status of run 2 within 133 s. As for run 1: 150 s by the clock.
+RUNS='len(s["runs"])'
+RUN2_DEADLINE=$(( $(date +%s) + 150 ))
+while (( $(date +%s) < RUN2_DEADLINE )); do
+  [[ "$(agent_field "$RUNS")" =~ ^[2-9] ]] && break
+  kill -0 "$G_AGENT2" 2>/dev/null || fail "agent run 2 exited: $(tail -5 "$LOGS/agent_run2.log")"
+  grep -q "FATAL" "$LOGS/agent_run2.log" && fail "agent run 2: $(grep -m2 FATAL "$LOGS/agent_run2.log")"
+  sleep 0.5
+done
+[[ "$(agent_field "$RUNS")" =~ ^[2-9] ]] || {
+  log "agent run 2 published no uplink_status within 150 s; its log ends:"
+  tail -15 "$LOGS/agent_run2.log" >&2
+  fail "agent run 2 never reported (logs in $LOGS)"
+}
+log "agent run 2 reports (uplink_status); waiting for its sequence and the spool to drain"
 
 # Wait for run 2 to finish its sequence, its spool to drain and the server to apply it all.
 "$PY" - "$LOGS/agent_state.json" "$LOGS/server_state.json" "$DRAIN_TIMEOUT" "$RATE" <<'PY' >&2 || true
@@ -406,5 +427,9 @@ PY
 echo "$RESULT"
 [[ -z "$JSON" ]] || echo "$RESULT" >"$JSON"
 if [[ "$RESULT" == *'"pass": true'* ]]; then exit 0; fi
+for f in agent_run2 monitor_agent server; do  # the CI output is all a clean clone keeps
+  echo "ros_netns_delivery: the last lines of $f.log:" >&2
+  tail -8 "$LOGS/$f.log" >&2 2>/dev/null || true
+done
 KEEP_LOGS=1
 exit 1

@@ -90,15 +90,16 @@ Expected<WindowInfo> writeEurocWindow(const std::string& source, double start_s,
 }
 
 Status ensureWholeRenders(const std::string& data, const std::vector<std::string>& sequences,
-                          const std::string& trajectories_dir, double rate_hz) {
-  for (const std::string& seq : sequences) {
-    if (fs::exists(fs::path(data) / seq / "mav0")) continue;
-    RenderRequest req;  // all of them in one scene
-    for (const std::string& s : sequences)
-      req.trajectories.push_back((fs::path(trajectories_dir) / (s + ".txt")).string());
-    req.rate_hz = rate_hz;
-    return renderCached(req, data);
-  }
+                          const std::string& trajectories_dir, double rate_hz,
+                          const std::vector<std::string>& settings) {
+  RenderRequest req;  // all of them in one scene
+  for (const std::string& s : sequences)
+    req.trajectories.push_back((fs::path(trajectories_dir) / (s + ".txt")).string());
+  req.rate_hz = rate_hz;
+  req.settings = settings;
+  if (!settings.empty()) return renderCached(req, data);  // compares the settings it was made with
+  for (const std::string& seq : sequences)
+    if (!fs::exists(fs::path(data) / seq / "mav0")) return renderCached(req, data);
   return Status::Ok();
 }
 

@@ -8,6 +8,7 @@
 
 #include <unistd.h>
 
+#include "hermes/core/render_cache.h"
 #include "hermes/system/dataset_window.h"
 
 namespace fs = std::filesystem;
@@ -74,6 +75,41 @@ TEST(DatasetWindow, ErrorsNameTheProblem) {
   EXPECT_NE(missing.error().find("cam0/data.csv"), std::string::npos) << missing.error();
   auto bad = writeEurocWindow(src.string(), 0.0, 0.0, (root / "view").string());
   EXPECT_FALSE(bad.ok());
+  fs::remove_all(root);
+}
+
+/// A finished whole-sequence render of one robot, made with `settings`.
+void fakeRender(const fs::path& data, const std::vector<std::string>& settings) {
+  fs::create_directories(data / "V1_01_easy" / "mav0");
+  RenderRequest req;
+  req.settings = settings;
+  auto fingerprint = renderFingerprint(req);
+  ASSERT_TRUE(fingerprint.ok()) << fingerprint.error();
+  std::ofstream(data / "render_config.yaml") << *fingerprint;
+  std::ofstream(data / "done") << "ok\n";
+}
+
+// --full --realistic: a render made with other settings is not taken for a
+// realistic one (here it would be rendered again, and this test binary has no
+// hermes_sim beside it: the error names it).
+TEST(WholeRenders, ARenderIsUsedOnlyWithTheSettingsItWasMadeWith) {
+  const fs::path root = fs::temp_directory_path() / ("hermes_whole_" + std::to_string(::getpid()));
+  fs::remove_all(root);
+  fs::create_directories(root / "gt");
+  std::ofstream(root / "gt" / "V1_01_easy.txt") << "0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n";
+  const std::vector<std::string> seqs = {"V1_01_easy"};
+  const std::vector<std::string> realistic = {"render.realistic=true"};
+  fakeRender(root / "default", {});
+  EXPECT_TRUE(ensureWholeRenders((root / "default").string(), seqs, (root / "gt").string(), 20).ok());
+  Status s = ensureWholeRenders((root / "default").string(), seqs, (root / "gt").string(), 20, realistic);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("hermes_sim"), std::string::npos) << s.error();
+  fakeRender(root / "realistic", realistic);
+  s = ensureWholeRenders((root / "realistic").string(), seqs, (root / "gt").string(), 20, realistic);
+  EXPECT_TRUE(s.ok()) << s.error();
+  s = ensureWholeRenders((root / "realistic").string(), seqs, (root / "gt").string(), 20,
+                         {"render.realistic=maybe"});
+  EXPECT_FALSE(s.ok());  // a bad setting is named, nothing rendered
   fs::remove_all(root);
 }
 

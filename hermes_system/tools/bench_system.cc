@@ -102,6 +102,10 @@ const char* kUsage =
     "                   corrupted run its own D with copies of the others). Each run's\n"
     "                   progress and bench_row.json say tracking record / replay.\n"
     "  --live-tracking  --full: track every run live (no recording)\n"
+    "  --realistic      --full: renders with every realism effect (render.realistic=true:\n"
+    "                   motion blur, dark regions, photon noise, aliasing copies, movers),\n"
+    "                   kept apart in data_cache/<SET>_full_realistic; give such a table\n"
+    "                   its own --out (a store refuses runs on other renders)\n"
     "  --run-out DIR    also write each run's outputs as `hermes run` does (metrics.json,\n"
     "                   loops.csv, loop_attempts.csv but for false_candidates, ...) to\n"
     "                   DIR/<variant>_<robots> (--swarm only; --full keeps them in --out)\n"
@@ -346,13 +350,24 @@ int writeJson(const nlohmann::json& out, const std::string& path) {
   return 0;
 }
 
+/// --full's options beside the variants and bandwidths.
+struct FullOptions {
+  std::string set;           ///< mh | v1
+  std::string out;           ///< store folder (empty: results/bench_full_SET)
+  std::string json_out;      ///< --json
+  std::string tracking_dir;  ///< --tracking-dir (empty: OUT/tracking)
+  bool live_tracking = false;
+  bool realistic = false;    ///< renders with every realism effect (render.realistic=true)
+  double first_s = 0;        ///< --duration: each robot's first S seconds (0: whole)
+};
+
 /// --full: the whole-sequence set `name` (mh | v1): render folder and sequences.
-Expected<std::pair<std::string, std::vector<std::string>>> fullSet(const std::string& name) {
+/// Realistic renders have their own folder (<set>_full_realistic).
+Expected<std::pair<std::string, std::vector<std::string>>> fullSet(const std::string& name, bool realistic) {
   const std::string cache = std::string(HERMES_SOURCE_DIR) + "/data_cache/";
-  if (name == "mh")
-    return std::make_pair(cache + "mh_full",
-                          split(hermes::system::bench::kMachineHall));
-  if (name == "v1") return std::make_pair(cache + "v1_full", split("V1_01_easy,V1_02_medium,V1_03_difficult"));
+  const std::string suffix = realistic ? "_full_realistic" : "_full";
+  if (name == "mh") return std::make_pair(cache + "mh" + suffix, split(hermes::system::bench::kMachineHall));
+  if (name == "v1") return std::make_pair(cache + "v1" + suffix, split("V1_01_easy,V1_02_medium,V1_03_difficult"));
   return Error{"--full: unknown set '" + name + "' (mh or v1)"};
 }
 
@@ -383,21 +398,25 @@ void printFullRow(const std::string& v, const std::string& bw, const nlohmann::j
 
 /// --full: every (variant, bandwidth) over the whole sequences of `set`, each run
 /// stored as it finishes (BenchStore), then the table, the combined JSON and plots.
-int runFull(const std::string& set, std::vector<std::string> variants, std::vector<std::string> bandwidths,
-            bool variants_given, bool bandwidths_given, double rate, double first_s, std::string out,
-            const std::vector<std::string>& overrides, const std::string& json_out,
-            bool live_tracking, std::string tracking_dir) {
-  auto data = fullSet(set);
+int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::string> bandwidths,
+            bool variants_given, bool bandwidths_given, double rate, const std::vector<std::string>& overrides) {
+  const std::string& set = o.set;
+  std::string& out = o.out;
+  std::string& tracking_dir = o.tracking_dir;
+  const double first_s = o.first_s;
+  auto data = fullSet(set, o.realistic);
   if (!data.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", data.error().c_str()), 2;
   if (!variants_given) variants = split("hermes,raw,fixed_k100");
   if (!bandwidths_given) bandwidths = split("0,10,2,0.5");
   if (out.empty()) out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set;
   // The tracking is recorded by the first run and replayed by the others
   // (tracking_record.h): the agents' tracking is most of a run's time.
-  if (live_tracking) tracking_dir.clear();
+  if (o.live_tracking) tracking_dir.clear();
   else if (tracking_dir.empty()) tracking_dir = (fs::path(out) / "tracking").string();
   const auto& [dir, seqs] = *data;
-  if (Status s = system::ensureWholeRenders(dir, seqs, groundTruthDir(), rate); !s)
+  const std::vector<std::string> render_settings =
+      o.realistic ? std::vector<std::string>{"render.realistic=true"} : std::vector<std::string>{};
+  if (Status s = system::ensureWholeRenders(dir, seqs, groundTruthDir(), rate, render_settings); !s)
     return std::fprintf(stderr, "hermes_bench_system: %s\n", s.error().c_str()), 1;
   Robots robots;
   for (const std::string& seq : seqs) {
@@ -412,7 +431,7 @@ int runFull(const std::string& set, std::vector<std::string> variants, std::vect
   }
   const nlohmann::json setup = {{"bench", "system_full"}, {"set", set}, {"data", dir},
                                 {"sequences", seqs}, {"rate_hz", rate}, {"first_s", first_s},
-                                {"overrides", overrides}};
+                                {"overrides", overrides}};  // "data" names the render folder
   auto store = system::BenchStore::open(out, setup);
   if (!store.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", store.error().c_str()), 2;
   std::fprintf(stderr, "hermes_bench_system: --full %s: %zu robots, %zu runs, kept in %s\n", set.c_str(),
@@ -464,7 +483,7 @@ int runFull(const std::string& set, std::vector<std::string> variants, std::vect
   if (std::system(cmd.c_str()) != 0)
     std::fprintf(stderr, "hermes_bench_system: warning: plots failed (%s)\n", cmd.c_str());
   std::fprintf(stderr, "hermes_bench_system: table in %s, plots in %s/plots\n", combined.c_str(), out.c_str());
-  return json_out.empty() ? 0 : writeJson(all, json_out);
+  return o.json_out.empty() ? 0 : writeJson(all, o.json_out);
 }
 
 }  // namespace
@@ -484,10 +503,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> swarm_seqs =
       split(hermes::system::bench::kMachineHall);
   std::vector<std::string> overrides;
-  std::string full, full_out;
+  FullOptions full;
   bool variants_given = false, bandwidths_given = false, duration_given = false;
-  bool live_tracking = false;
-  std::string tracking_dir;
   hermes::system::bench::Options opt(argc, argv, "hermes_bench_system");
   while (opt.next()) {
     if (opt.is("--help") || opt.is("-h")) {
@@ -519,13 +536,15 @@ int main(int argc, char** argv) {
     } else if (opt.is("--swarm-sequences")) {
       swarm_seqs = split(opt.value());
     } else if (opt.is("--full")) {
-      full = opt.value();
+      full.set = opt.value();
     } else if (opt.is("--out")) {
-      full_out = opt.value();
+      full.out = opt.value();
     } else if (opt.is("--live-tracking")) {
-      live_tracking = true;
+      full.live_tracking = true;
     } else if (opt.is("--tracking-dir")) {
-      tracking_dir = opt.value();
+      full.tracking_dir = opt.value();
+    } else if (opt.is("--realistic")) {
+      full.realistic = true;
     } else if (opt.is("--set")) {
       overrides.push_back(opt.value());
     } else if (opt.is("--json")) {
@@ -544,18 +563,19 @@ int main(int argc, char** argv) {
       return 2;
     }
 
-  if (!full.empty() && !swarm.empty())
+  if (!full.set.empty() && !swarm.empty())
     return std::fprintf(stderr, "hermes_bench_system: --full and --swarm are two different tables; give one\n"), 2;
-  if (!full_out.empty() && full.empty())
+  if (!full.out.empty() && full.set.empty())
     return std::fprintf(stderr, "hermes_bench_system: --out is --full's store folder; give --full too\n"), 2;
-  if ((live_tracking || !tracking_dir.empty()) && full.empty())
-    return std::fprintf(stderr, "hermes_bench_system: --live-tracking / --tracking-dir belong to --full\n"), 2;
+  if ((full.live_tracking || !full.tracking_dir.empty() || full.realistic) && full.set.empty())
+    return std::fprintf(stderr, "hermes_bench_system: --live-tracking / --tracking-dir / --realistic belong to --full\n"), 2;
   if (!run_out.empty() && swarm.empty())
     return std::fprintf(stderr, "hermes_bench_system: --run-out belongs to --swarm (--full keeps every run in --out)\n"), 2;
-  if (!full.empty())
-    return runFull(full, variants, bandwidths, variants_given, bandwidths_given, rate,
-                   duration_given ? duration : 0, full_out, overrides, json_out, live_tracking,
-                   tracking_dir);
+  if (!full.set.empty()) {
+    full.json_out = json_out;
+    full.first_s = duration_given ? duration : 0;
+    return runFull(full, variants, bandwidths, variants_given, bandwidths_given, rate, overrides);
+  }
   if (!swarm.empty()) {
     if (!variants_given) variants = {"hermes", "raw"};
     for (const std::string& n : swarm)
