@@ -252,18 +252,25 @@ agent_field() {  # agent_field <python expression on s (agent state)>
   "$PY" -c "import json,sys; s=json.load(open(sys.argv[1])); print($1)" "$LOGS/agent_state.json" 2>/dev/null || echo "?"
 }
 
+# wait_agent <run> <pgid> <log> <python expression on s> <regex>: up to 150 s by the clock
+# until the agent state's expression matches; fails at once when the run's roslaunch
+# exits or its log has a FATAL line. Returns 1 on timeout.
+wait_agent() {
+  local deadline=$(( $(date +%s) + 150 ))
+  while (( $(date +%s) < deadline )); do
+    [[ "$(agent_field "$4")" =~ $5 ]] && return 0
+    kill -0 "$2" 2>/dev/null || fail "agent $1 exited: $(tail -5 "$3")"
+    grep -q "FATAL" "$3" && fail "agent $1: $(grep -m2 FATAL "$3")"
+    sleep 0.3
+  done
+  [[ "$(agent_field "$4")" =~ $5 ]]
+}
+
 T0=$(date +%s.%N)
 launch_agent "run 1" "$LOGS/agent_run1.log" true; G_AGENT1=$G_AGENT
 # The first submap needs the nodes up through the lossy link, a map and one window
 # (47 s on a loaded 2-core CI machine): 150 s by the clock before giving up.
-FIRST_DEADLINE=$(( $(date +%s) + 150 ))
-while (( $(date +%s) < FIRST_DEADLINE )); do
-  [[ "$(agent_field "$CREATED")" =~ ^[1-9] ]] && break
-  kill -0 "$G_AGENT1" 2>/dev/null || fail "agent run 1 exited: $(tail -5 "$LOGS/agent_run1.log")"
-  grep -q "FATAL" "$LOGS/agent_run1.log" && fail "agent run 1: $(grep -m2 FATAL "$LOGS/agent_run1.log")"
-  sleep 0.2
-done
-[[ "$(agent_field "$CREATED")" =~ ^[1-9] ]] ||
+wait_agent "run 1" "$G_AGENT1" "$LOGS/agent_run1.log" "$CREATED" '^[1-9]' ||
   fail "agent run 1 created no submap within 150 s: $(tail -3 "$LOGS/agent_run1.log")"
 T0=$(date +%s.%N)
 log "agent run 1 created its first submap; the timeline starts"
@@ -292,15 +299,7 @@ launch_agent "run 2" "$LOGS/agent_run2.log" "$RESTART_CLEAR"; G_AGENT2=$G_AGENT
 # (~20 parameter reads, topic registrations, the master's publisherUpdate to the
 # monitor): run 1 needed 48 s to its first submap on a loaded CI machine, and one
 # CI run saw no status of run 2 within 133 s. As for run 1: 150 s by the clock.
-RUNS='len(s["runs"])'
-RUN2_DEADLINE=$(( $(date +%s) + 150 ))
-while (( $(date +%s) < RUN2_DEADLINE )); do
-  [[ "$(agent_field "$RUNS")" =~ ^[2-9] ]] && break
-  kill -0 "$G_AGENT2" 2>/dev/null || fail "agent run 2 exited: $(tail -5 "$LOGS/agent_run2.log")"
-  grep -q "FATAL" "$LOGS/agent_run2.log" && fail "agent run 2: $(grep -m2 FATAL "$LOGS/agent_run2.log")"
-  sleep 0.5
-done
-[[ "$(agent_field "$RUNS")" =~ ^[2-9] ]] || {
+wait_agent "run 2" "$G_AGENT2" "$LOGS/agent_run2.log" 'len(s["runs"])' '^[2-9]' || {
   log "agent run 2 published no uplink_status within 150 s; its log ends:"
   tail -15 "$LOGS/agent_run2.log" >&2
   fail "agent run 2 never reported (logs in $LOGS)"
