@@ -185,7 +185,8 @@ void minimiseRobustCost(const Correspondences& c, const PinholeIntrinsics& K,
 
 Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrinsics& K,
                                   const SE3& T_C_W_init, const PoseEstimationParams& p,
-                                  const std::vector<bool>* initial_inliers) {
+                                  const std::vector<bool>* initial_inliers,
+                                  const std::vector<bool>* trusted) {
   Status s = checkInput(c, p);
   if (!s) return Error{s.error()};
   const std::size_t n = c.size();
@@ -197,6 +198,8 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
       return Error{"pose refinement: initial inlier mask has the wrong length"};
     inlier = *initial_inliers;
   }
+  if (trusted && trusted->size() != n)
+    return Error{"pose refinement: trusted mask has the wrong length"};
   std::vector<double> chi2(n, 0.0);
 
   auto classify = [&]() {
@@ -217,10 +220,12 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
       }
     }
   };
+  std::vector<bool> use(n);
   for (int round = 0; round < p.refine_rounds; ++round) {
-    const int used = int(std::count(inlier.begin(), inlier.end(), true));
+    for (std::size_t i = 0; i < n; ++i) use[i] = inlier[i] && (!trusted || (*trusted)[i]);
+    const int used = int(std::count(use.begin(), use.end(), true));
     if (used < p.min_inliers) break;
-    minimiseRobustCost(c, K, inlier, p.huber_px, p.stereo_residual ? p.stereo_sigma_scale : 0.0,
+    minimiseRobustCost(c, K, use, p.huber_px, p.stereo_residual ? p.stereo_sigma_scale : 0.0,
                        p.iterations_per_round, &R, &t);
     classify();  // every observation, so wrongly rejected ones can come back
   }

@@ -27,6 +27,7 @@ Status TrackerParams::read(const Config& c) {
                           {"min_tracked", &min_tracked},
                           {"weak_tracked", &weak_tracked},
                           {"local_map_keyframes", &local_map_keyframes},
+                          {"trusted_observations", &trusted_observations},
                           {"relocalise_keyframes", &relocalise_keyframes}}) {
     Status s = c.get(std::string("tracker.") + key, ptr);
     if (!s) return s;
@@ -49,6 +50,7 @@ void TrackerParams::write(ConfigWriter* w) const {
   w->set("tracker.min_tracked", min_tracked);
   w->set("tracker.weak_tracked", weak_tracked);
   w->set("tracker.local_map_keyframes", local_map_keyframes);
+  w->set("tracker.trusted_observations", trusted_observations);
   w->set("tracker.relocalise_radius_px", relocalise_radius_px);
   w->set("tracker.relocalise_keyframes", relocalise_keyframes);
 }
@@ -62,6 +64,8 @@ Status TrackerParams::validate() const {
     return Error{"tracker.min_tracked must be >= pose.min_inliers"};
   if (weak_tracked < 0) return Error{"tracker.weak_tracked must be >= 0 (0 = never weak)"};
   if (local_map_keyframes < 1) return Error{"tracker.local_map_keyframes must be >= 1"};
+  if (trusted_observations < 0)
+    return Error{"tracker.trusted_observations must be >= 0 (0 = every landmark)"};
   if (!(relocalise_radius_px > 0)) return Error{"tracker.relocalise_radius_px must be > 0"};
   if (relocalise_keyframes < 0) return Error{"tracker.relocalise_keyframes must be >= 0"};
   return Status::Ok();
@@ -247,6 +251,14 @@ std::vector<std::size_t> Tracker::localMap(int keyframes) const {
   return {ids.begin(), ids.end()};
 }
 
+std::vector<bool> Tracker::trustedLandmarks(const std::vector<int>& ids) const {
+  std::vector<bool> trusted(ids.size(), true);
+  if (params_.trusted_observations <= 0) return trusted;
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    trusted[i] = int(landmarks_[ids[i]].observations.size()) >= params_.trusted_observations;
+  return trusted;
+}
+
 bool Tracker::initialise(const CameraFrame& frame, FeatureSet& fs, TrackResult* r) {
   int with_depth = 0;
   for (const auto& k : fs.keypoints) with_depth += k.depth > 0;
@@ -323,7 +335,11 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
     }
     Expected<PoseEstimate> e = Error{"no pose"};
     if (int(c.size()) >= params_.pose.min_inliers) {
-      if (refine_first) e = refinePose(c, K_, T_C_W_pred, params_.pose);
+      if (refine_first) {
+        const std::vector<bool> trusted = trustedLandmarks(corr_landmark);
+        const bool enough = std::count(trusted.begin(), trusted.end(), true) >= params_.min_tracked;
+        e = refinePose(c, K_, T_C_W_pred, params_.pose, nullptr, enough ? &trusted : nullptr);
+      }
       if (!e.ok() || e->num_inliers < params_.min_tracked) e = estimatePose(c, K_, params_.pose);
     }
     return e;

@@ -171,6 +171,36 @@ TEST(PoseEstimation, RefinementFromPredictionRejectsOutliers) {
   EXPECT_LT(missed, 5);
 }
 
+TEST(PoseEstimation, UntrustedObservationsCannotPullThePose) {
+  // 120 static points, and 240 on an object that moved 6 cm since its points
+  // were mapped: refined from the true pose, all of them together settle on
+  // the object; with only the static ones trusted the pose stays true and the
+  // object's points are outliers.
+  std::mt19937 rng(5);
+  const PinholeIntrinsics K = distill::eurocCam0Intrinsics();
+  const SE3 T_C_W = randomPose(rng, 0.3, 0.5);
+  std::vector<bool> is_out;
+  Correspondences c = makeScene(rng, T_C_W, K, 360, 0.5, 0.0, &is_out);
+  std::vector<bool> trusted(c.size(), true);
+  const Vec3 moved(0.06, 0.0, 0.0);
+  for (std::size_t i = 120; i < c.size(); ++i) {
+    c.p_W[i] -= T_C_W.inverse().rotation() * moved;  // mapped where the object was
+    trusted[i] = false;
+  }
+  auto all = refinePose(c, K, T_C_W, PoseEstimationParams());
+  ASSERT_TRUE(all.ok()) << all.error();
+  EXPECT_GT(translationalDistance(all->T_C_W, T_C_W), 0.03);
+  auto est = refinePose(c, K, T_C_W, PoseEstimationParams(), nullptr, &trusted);
+  ASSERT_TRUE(est.ok()) << est.error();
+  EXPECT_LT(translationalDistance(est->T_C_W, T_C_W), 0.005);
+  int static_in = 0, object_in = 0;
+  for (std::size_t i = 0; i < c.size(); ++i) (i < 120 ? static_in : object_in) += est->inlier[i];
+  EXPECT_GT(static_in, 110);
+  EXPECT_LT(object_in, 12);
+  std::vector<bool> wrong_length(3, true);
+  EXPECT_FALSE(refinePose(c, K, T_C_W, PoseEstimationParams(), nullptr, &wrong_length).ok());
+}
+
 TEST(PoseEstimation, RefinementReachesTheCeresOptimumOfTheSameRobustCost) {
   // One round over every observation (30 % outliers, so the Huber tails matter):
   // the hand-written Levenberg-Marquardt and Ceres on ReprojectionResidual +

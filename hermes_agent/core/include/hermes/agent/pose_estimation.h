@@ -102,10 +102,13 @@ Expected<PoseEstimate> estimatePose(const Correspondences& c, const PinholeIntri
                                     const PoseEstimationParams& params);
 
 /// Robust motion-only refinement from an initial guess (e.g. the constant-velocity
-/// prediction). `initial_inliers` (optional) restricts the first round. Errors:
-/// fewer than min_inliers survive.
+/// prediction). `initial_inliers` (optional) restricts the first round.
+/// `trusted` (optional): only these observations enter the optimisation; the
+/// others are still classified against the result (inlier or not) but cannot
+/// move the pose. Errors: fewer than min_inliers survive.
 Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrinsics& K,
                                   const SE3& T_C_W_init, const PoseEstimationParams& params,
-                                  const std::vector<bool>* initial_inliers = nullptr);
+                                  const std::vector<bool>* initial_inliers = nullptr,
+                                  const std::vector<bool>* trusted = nullptr);
 
 }  // namespace hermes

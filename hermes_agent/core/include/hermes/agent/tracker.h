@@ -77,6 +77,14 @@ struct TrackerParams {
   /// spends more of the budget on windows in trouble). 0 = never weak.
   int weak_tracked = 80;
   int local_map_keyframes = 6;    ///< landmarks of the last N keyframes form the local map
+  /// Moving objects: a landmark observed by fewer keyframes than this is new and
+  /// may sit on something that moves (a landmark made on a moving box is seen
+  /// at a new place in the next frame). While at least min_tracked matches are
+  /// on older landmarks, only those move the pose; the new ones are classified
+  /// against it (and kept when they fit) but cannot pull it. Without this a
+  /// textured mover as large in the image as the static scene drags the
+  /// odometry along (README, "moving objects"). 0 = every landmark moves the pose.
+  int trusted_observations = 3;
   double relocalise_radius_px = 40;  ///< search radius when lost
   /// When lost and the projection search fails: match the landmarks of the last N
   /// keyframes to the frame by descriptor alone + PnP RANSAC (0 = off).
@@ -171,6 +179,8 @@ class Tracker {
                       const std::vector<int>& keypoint_landmark);
   /// Landmarks seen by the last `keyframes` keyframes (good ones only).
   std::vector<std::size_t> localMap(int keyframes) const;
+  /// Per landmark id: observed by at least trusted_observations keyframes.
+  std::vector<bool> trustedLandmarks(const std::vector<int>& ids) const;
   void runLocalMapping(TrackResult* r, const std::vector<float>& scales);
   /// Parallel mapping: applies a finished BA (if any), then starts the next one
   /// when keyframes wait and the mapper is free.
