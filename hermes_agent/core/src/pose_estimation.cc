@@ -245,6 +245,19 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
   return out;
 }
 
+double projectionShift(const Correspondences& c, const PinholeIntrinsics& K, const SE3& a,
+                       const SE3& b) {
+  double sum = 0;
+  int n = 0;
+  for (const Vec3& p : c.p_W) {
+    const Vec3 pa = a * p, pb = b * p;
+    if (pa.z() <= 1e-6 || pb.z() <= 1e-6) continue;
+    sum += (K.project(pa) - K.project(pb)).norm();
+    ++n;
+  }
+  return n > 0 ? sum / n : 0.0;
+}
+
 Expected<PoseEstimate> estimatePose(const Correspondences& c, const PinholeIntrinsics& K,
                                     const PoseEstimationParams& p) {
   Status s = checkInput(c, p);

@@ -34,6 +34,8 @@ Status TrackerParams::read(const Config& c) {
   }
   Status s = c.get("tracker.relocalise_radius_px", &relocalise_radius_px);
   if (!s) return s;
+  s = c.get("tracker.trusted_disagreement_px", &trusted_disagreement_px);
+  if (!s) return s;
   return validate();
 }
 
@@ -51,6 +53,7 @@ void TrackerParams::write(ConfigWriter* w) const {
   w->set("tracker.weak_tracked", weak_tracked);
   w->set("tracker.local_map_keyframes", local_map_keyframes);
   w->set("tracker.trusted_observations", trusted_observations);
+  w->set("tracker.trusted_disagreement_px", trusted_disagreement_px);
   w->set("tracker.relocalise_radius_px", relocalise_radius_px);
   w->set("tracker.relocalise_keyframes", relocalise_keyframes);
 }
@@ -66,6 +69,8 @@ Status TrackerParams::validate() const {
   if (local_map_keyframes < 1) return Error{"tracker.local_map_keyframes must be >= 1"};
   if (trusted_observations < 0)
     return Error{"tracker.trusted_observations must be >= 0 (0 = every landmark)"};
+  if (!(trusted_disagreement_px >= 0))
+    return Error{"tracker.trusted_disagreement_px must be >= 0 (0 = trusted only)"};
   if (!(relocalise_radius_px > 0)) return Error{"tracker.relocalise_radius_px must be > 0"};
   if (relocalise_keyframes < 0) return Error{"tracker.relocalise_keyframes must be >= 0"};
   return Status::Ok();
@@ -339,6 +344,12 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
         const std::vector<bool> trusted = trustedLandmarks(corr_landmark);
         const bool enough = std::count(trusted.begin(), trusted.end(), true) >= params_.min_tracked;
         e = refinePose(c, K_, T_C_W_pred, params_.pose, nullptr, enough ? &trusted : nullptr);
+        if (enough && e.ok() && params_.trusted_disagreement_px > 0) {
+          Expected<PoseEstimate> all = refinePose(c, K_, T_C_W_pred, params_.pose);
+          if (all.ok() && projectionShift(c, K_, all->T_C_W, e->T_C_W) <
+                              params_.trusted_disagreement_px)
+            e = std::move(all);
+        }
       }
       if (!e.ok() || e->num_inliers < params_.min_tracked) e = estimatePose(c, K_, params_.pose);
     }

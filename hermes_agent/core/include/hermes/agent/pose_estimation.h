@@ -111,4 +111,9 @@ Expected<PoseEstimate> refinePose(const Correspondences& c, const PinholeIntrins
                                   const std::vector<bool>* initial_inliers = nullptr,
                                   const std::vector<bool>* trusted = nullptr);
 
+/// Mean pixel distance between the projections of c's points under two poses
+/// (points in front of both cameras only; 0 if none).
+double projectionShift(const Correspondences& c, const PinholeIntrinsics& K, const SE3& T_C_W_a,
+                       const SE3& T_C_W_b);
+
 }  // namespace hermes

@@ -85,6 +85,12 @@ struct TrackerParams {
   /// textured mover as large in the image as the static scene drags the
   /// odometry along (README, "moving objects"). 0 = every landmark moves the pose.
   int trusted_observations = 3;
+  /// > 0: the pose is also solved with every match, and that solution is kept
+  /// unless it moves the landmarks' projections by at least this mean distance
+  /// from the trusted-only one [px] (new landmarks then only count where they
+  /// agree: in fast motion they are much of what constrains the pose). 0 = the
+  /// trusted-only solution always (README, "Moving objects").
+  double trusted_disagreement_px = 0;
   double relocalise_radius_px = 40;  ///< search radius when lost
   /// When lost and the projection search fails: match the landmarks of the last N
   /// keyframes to the frame by descriptor alone + PnP RANSAC (0 = off).
