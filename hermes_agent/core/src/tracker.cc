@@ -257,11 +257,25 @@ std::vector<std::size_t> Tracker::localMap(int keyframes) const {
 }
 
 std::vector<bool> Tracker::trustedLandmarks(const std::vector<int>& ids) const {
-  std::vector<bool> trusted(ids.size(), true);
-  if (params_.trusted_observations <= 0) return trusted;
+  std::vector<bool> trusted(ids.size());
   for (std::size_t i = 0; i < ids.size(); ++i)
     trusted[i] = int(landmarks_[ids[i]].observations.size()) >= params_.trusted_observations;
   return trusted;
+}
+
+Expected<PoseEstimate> Tracker::refineFromPrior(const Correspondences& c,
+                                                const std::vector<int>& ids,
+                                                const SE3& T_C_W_pred) const {
+  if (params_.trusted_observations <= 0) return refinePose(c, K_, T_C_W_pred, params_.pose);
+  const std::vector<bool> trusted = trustedLandmarks(ids);
+  if (std::count(trusted.begin(), trusted.end(), true) < params_.min_tracked)
+    return refinePose(c, K_, T_C_W_pred, params_.pose);
+  Expected<PoseEstimate> e = refinePose(c, K_, T_C_W_pred, params_.pose, nullptr, &trusted);
+  if (!e.ok() || params_.trusted_disagreement_px <= 0) return e;
+  Expected<PoseEstimate> all = refinePose(c, K_, T_C_W_pred, params_.pose);
+  if (all.ok() && projectionShift(c, K_, all->T_C_W, e->T_C_W) < params_.trusted_disagreement_px)
+    return all;
+  return e;
 }
 
 bool Tracker::initialise(const CameraFrame& frame, FeatureSet& fs, TrackResult* r) {
@@ -340,17 +354,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
     }
     Expected<PoseEstimate> e = Error{"no pose"};
     if (int(c.size()) >= params_.pose.min_inliers) {
-      if (refine_first) {
-        const std::vector<bool> trusted = trustedLandmarks(corr_landmark);
-        const bool enough = std::count(trusted.begin(), trusted.end(), true) >= params_.min_tracked;
-        e = refinePose(c, K_, T_C_W_pred, params_.pose, nullptr, enough ? &trusted : nullptr);
-        if (enough && e.ok() && params_.trusted_disagreement_px > 0) {
-          Expected<PoseEstimate> all = refinePose(c, K_, T_C_W_pred, params_.pose);
-          if (all.ok() && projectionShift(c, K_, all->T_C_W, e->T_C_W) <
-                              params_.trusted_disagreement_px)
-            e = std::move(all);
-        }
-      }
+      if (refine_first) e = refineFromPrior(c, corr_landmark, T_C_W_pred);
       if (!e.ok() || e->num_inliers < params_.min_tracked) e = estimatePose(c, K_, params_.pose);
     }
     return e;

@@ -187,6 +187,11 @@ class Tracker {
   std::vector<std::size_t> localMap(int keyframes) const;
   /// Per landmark id: observed by at least trusted_observations keyframes.
   std::vector<bool> trustedLandmarks(const std::vector<int>& ids) const;
+  /// Motion-only refinement from the prediction: trusted landmarks only while
+  /// min_tracked of them match (and, with trusted_disagreement_px, every match
+  /// where the two solutions agree); every match otherwise.
+  Expected<PoseEstimate> refineFromPrior(const Correspondences& c, const std::vector<int>& ids,
+                                         const SE3& T_C_W_pred) const;
   void runLocalMapping(TrackResult* r, const std::vector<float>& scales);
   /// Parallel mapping: applies a finished BA (if any), then starts the next one
   /// when keyframes wait and the mapper is free.
