@@ -27,7 +27,7 @@ render() {  # render <name> <trajectory> <format>
     echo "[frontend] rendering $1 ($3, ${DURATION} s)" >&2
     rm -rf "$dir"
     "$BIN/hermes_sim" --trajectory "$GT/$2.txt" --out "$dir" --format "$3" --duration "$DURATION" \
-      --seed 1 >/dev/null 2>&1
+      --seed 1 --plain >/dev/null 2>&1   # the look of its published figures
     touch "$dir/done"
   fi
   echo "$dir/$2"

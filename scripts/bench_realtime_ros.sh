@@ -36,8 +36,8 @@ mkdir -p "$CACHE"
 if [[ ! -f "$CACHE/done" ]]; then
   echo "[realtime] rendering ${DURATION} s of stereo (20 Hz) and RGB-D (30 Hz), writing bags ..." >&2
   GT="$ROOT/config/trajectories"
-  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_01_easy.txt" --out "$CACHE/euroc" --duration "$DURATION" --rate 20 --seed 1 >/dev/null 2>&1
-  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_02_easy.txt" --out "$CACHE/tum" --format tum --duration "$DURATION" --rate 30 --seed 2 >/dev/null 2>&1
+  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_01_easy.txt" --out "$CACHE/euroc" --duration "$DURATION" --rate 20 --seed 1 --plain >/dev/null 2>&1
+  "$BUILD/bin/hermes_sim" --trajectory "$GT/MH_02_easy.txt" --out "$CACHE/tum" --format tum --duration "$DURATION" --rate 30 --seed 2 --plain >/dev/null 2>&1
   "$BUILD/bin/hermes_dataset_to_bag" --dataset "$CACHE/euroc/MH_01_easy" --out "$CACHE/euroc.bag" --layout euroc 2>/dev/null
   "$BUILD/bin/hermes_dataset_to_bag" --dataset "$CACHE/tum/MH_02_easy" --out "$CACHE/tum.bag" --layout tum 2>/dev/null
   touch "$CACHE/done"

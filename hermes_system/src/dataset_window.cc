@@ -97,7 +97,13 @@ Status ensureWholeRenders(const std::string& data, const std::vector<std::string
     req.trajectories.push_back((fs::path(trajectories_dir) / (s + ".txt")).string());
   req.rate_hz = rate_hz;
   req.settings = settings;
-  if (!settings.empty()) return renderCached(req, data);  // compares the settings it was made with
+  auto fingerprint = renderFingerprint(req);
+  if (!fingerprint.ok()) return Error{"render " + data + ": " + fingerprint.error()};
+  // Any look but the plain one: compare the settings it was made with.
+  if (!isPlainLook(req, *fingerprint) || fs::exists(fs::path(data) / "render_config.yaml"))
+    return renderCached(req, data);
+  // The plain look, rendered before render_config.yaml existed (or by hand):
+  // complete when every sequence is there.
   for (const std::string& seq : sequences)
     if (!fs::exists(fs::path(data) / seq / "mav0")) return renderCached(req, data);
   return Status::Ok();

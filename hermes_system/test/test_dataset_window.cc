@@ -8,6 +8,7 @@
 
 #include <unistd.h>
 
+#include "hermes/core/render/settings.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/system/dataset_window.h"
 
@@ -89,27 +90,36 @@ void fakeRender(const fs::path& data, const std::vector<std::string>& settings) 
   std::ofstream(data / "done") << "ok\n";
 }
 
-// --full --realistic: a render made with other settings is not taken for a
-// realistic one (here it would be rendered again, and this test binary has no
-// hermes_sim beside it: the error names it).
+// A render made with other settings is not taken for the one asked for (here
+// it would be rendered again, and this test binary has no hermes_sim beside
+// it: the error names it). Without settings a request is realistic.
 TEST(WholeRenders, ARenderIsUsedOnlyWithTheSettingsItWasMadeWith) {
   const fs::path root = fs::temp_directory_path() / ("hermes_whole_" + std::to_string(::getpid()));
   fs::remove_all(root);
   fs::create_directories(root / "gt");
   std::ofstream(root / "gt" / "V1_01_easy.txt") << "0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n";
   const std::vector<std::string> seqs = {"V1_01_easy"};
+  const std::vector<std::string> plain = {render::kPlainLook};
   const std::vector<std::string> realistic = {"render.realistic=true"};
-  fakeRender(root / "default", {});
-  EXPECT_TRUE(ensureWholeRenders((root / "default").string(), seqs, (root / "gt").string(), 20).ok());
-  Status s = ensureWholeRenders((root / "default").string(), seqs, (root / "gt").string(), 20, realistic);
-  ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.error().find("hermes_sim"), std::string::npos) << s.error();
-  fakeRender(root / "realistic", realistic);
-  s = ensureWholeRenders((root / "realistic").string(), seqs, (root / "gt").string(), 20, realistic);
+  const std::string gt = (root / "gt").string();
+  fakeRender(root / "plain", plain);
+  EXPECT_TRUE(ensureWholeRenders((root / "plain").string(), seqs, gt, 20, plain).ok());
+  for (const std::vector<std::string>& other : {realistic, std::vector<std::string>{}}) {
+    Status s = ensureWholeRenders((root / "plain").string(), seqs, gt, 20, other);
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().find("hermes_sim"), std::string::npos) << s.error();
+  }
+  fakeRender(root / "realistic", {});  // the default look is the realistic one
+  Status s = ensureWholeRenders((root / "realistic").string(), seqs, gt, 20, realistic);
   EXPECT_TRUE(s.ok()) << s.error();
-  s = ensureWholeRenders((root / "realistic").string(), seqs, (root / "gt").string(), 20,
-                         {"render.realistic=maybe"});
+  EXPECT_FALSE(ensureWholeRenders((root / "realistic").string(), seqs, gt, 20, plain).ok());
+  s = ensureWholeRenders((root / "realistic").string(), seqs, gt, 20, {"render.realistic=maybe"});
   EXPECT_FALSE(s.ok());  // a bad setting is named, nothing rendered
+  // A plain render from before render_config.yaml existed: complete sequences count
+  // for the plain look only.
+  fs::create_directories(root / "old" / "V1_01_easy" / "mav0");
+  EXPECT_TRUE(ensureWholeRenders((root / "old").string(), seqs, gt, 20, plain).ok());
+  EXPECT_FALSE(ensureWholeRenders((root / "old").string(), seqs, gt, 20).ok());
   fs::remove_all(root);
 }
 

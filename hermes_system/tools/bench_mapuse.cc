@@ -45,6 +45,7 @@
 #include "hermes/agent/tracker.h"
 #include "hermes/core/evaluation.h"
 #include "hermes/core/metrics.h"
+#include "hermes/core/render/settings.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/distill/distiller.h"
@@ -101,6 +102,7 @@ bool renderHall(const fs::path& data, const std::vector<std::string>& names, dou
   for (const std::string& n : names)
     req.trajectories.push_back(std::string(HERMES_SOURCE_DIR) + "/config/trajectories/" + n + ".txt");
   req.duration_s = duration;
+  req.settings = {render::kPlainLook};  // the look of its published figures
   if (Status s = renderCached(req, data.string()); !s) {
     std::fprintf(stderr, "[mapuse] %s\n", s.error().c_str());
     return false;

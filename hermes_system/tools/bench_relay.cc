@@ -25,6 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench_args.h"
+#include "hermes/core/render/settings.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/offline_run.h"
@@ -168,6 +169,7 @@ int main(int argc, char** argv) {
       req.start_s = r.start_s;
       req.duration_s = duration;
       req.rate_hz = rate;
+      req.settings = {render::kPlainLook};  // the look of its published figures
       char key[64];
       std::snprintf(key, sizeof key, "d%g_s%g", duration, r.start_s);
       const fs::path folder = fs::path(cache) / key;

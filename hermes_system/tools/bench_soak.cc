@@ -25,6 +25,7 @@
 
 #include "bench_args.h"
 #include "hermes/agent/run_config.h"
+#include "hermes/core/render/settings.h"
 #include "hermes/system/dataset_window.h"
 #include "hermes/system/mission.h"
 #include "hermes/system/offline_run.h"
@@ -182,7 +183,7 @@ int main(int argc, char** argv) {
   std::error_code ec;
   fs::create_directories(out, ec);
   if (ec) return fail("cannot create " + out + ": " + ec.message());
-  if (Status s = system::ensureWholeRenders(data, plan.sequences, groundTruthDir(), 20); !s) return fail(s.error());
+  if (Status s = system::ensureWholeRenders(data, plan.sequences, groundTruthDir(), 20, {render::kPlainLook}); !s) return fail(s.error());
 
   // The plan: each sequence's length from its render.
   std::map<std::string, std::unique_ptr<Dataset>> bases;

@@ -36,6 +36,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench_args.h"
+#include "hermes/core/render/settings.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/system/bench_store.h"
 #include "hermes/system/dataset_window.h"
@@ -81,12 +82,13 @@ const char* kUsage =
     "  --swarm-sequences L  (default MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,\n"
     "                   MH_05_difficult)\n"
     "  --full SET       instead: the whole-sequence table. SET mh: five robots over whole\n"
-    "                   MH_01-05 in one hall (data_cache/mh_full); v1: three over whole\n"
-    "                   V1_01-03 (data_cache/v1_full); rendered from ../shared/data/euroc_gt\n"
+    "                   MH_01-05 in one hall (data_cache/mh_full_realistic); v1: three over\n"
+    "                   whole V1_01-03 (data_cache/v1_full_realistic); rendered from ../shared/data/euroc_gt\n"
     "                   (else config/trajectories) when missing. Bandwidths default to 0,10,2,0.5, variants to\n"
     "                   hermes,raw,fixed_k100 (ablations: csa_off, covisibility, md, md_a, md_b\n"
     "                   run at every bandwidth given). Each run is kept in --out\n"
-    "                   (default results/bench_full_SET/<variant>_<Mbit/s>/: metrics,\n"
+    "                   (default results/bench_full_SET_realistic/<variant>_<Mbit/s>/, with\n"
+    "                   --plain results/bench_full_SET/...: metrics,\n"
     "                   trajectories, CSVs, bench_row.json); a run with a row there is\n"
     "                   not run again, so an interrupted table resumes. Progress on\n"
     "                   stderr every 30 s; plots (ATE and bytes vs bandwidth) in OUT/plots.\n"
@@ -102,10 +104,12 @@ const char* kUsage =
     "                   corrupted run its own D with copies of the others). Each run's\n"
     "                   progress and bench_row.json say tracking record / replay.\n"
     "  --live-tracking  --full: track every run live (no recording)\n"
-    "  --realistic      --full: renders with every realism effect (render.realistic=true:\n"
-    "                   motion blur, dark regions, photon noise, aliasing copies, movers),\n"
-    "                   kept apart in data_cache/<SET>_full_realistic; give such a table\n"
-    "                   its own --out (a store refuses runs on other renders)\n"
+    "  --realistic      --full (the default): renders with every realism effect\n"
+    "                   (render.realistic=true: motion blur, dark regions, photon noise,\n"
+    "                   aliasing copies, movers) in data_cache/<SET>_full_realistic\n"
+    "  --plain          --full: renders with none (the look of the tables before the\n"
+    "                   twenty-fourth pass) in data_cache/<SET>_full; a store refuses\n"
+    "                   runs on other renders, so each look has its own --out\n"
     "  --run-out DIR    also write each run's outputs as `hermes run` does (metrics.json,\n"
     "                   loops.csv, loop_attempts.csv but for false_candidates, ...) to\n"
     "                   DIR/<variant>_<robots> (--swarm only; --full keeps them in --out)\n"
@@ -173,6 +177,7 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
   req.start_s = start;
   req.duration_s = duration;
   req.rate_hz = rate;
+  req.settings = {render::kPlainLook};  // the look of the sweep's published figures
   const fs::path data = fs::path(cache) / key;
   if (Status s = hermes::renderCached(req, data.string()); !s) return Error{s.error()};
   return data;
@@ -185,7 +190,7 @@ Expected<fs::path> renderCached(const std::string& cache, double duration, doubl
 Expected<Robots> swarmRobots(const std::string& data, const std::vector<std::string>& seqs,
                              const std::string& views, double duration, double rate, int n,
                              int first) {
-  if (Status s = system::ensureWholeRenders(data, seqs, groundTruthDir(), rate); !s)
+  if (Status s = system::ensureWholeRenders(data, seqs, groundTruthDir(), rate, {render::kPlainLook}); !s)
     return Error{s.error()};
   Robots robots;
   for (int k = 0; k < n; ++k) {
@@ -357,7 +362,8 @@ struct FullOptions {
   std::string json_out;      ///< --json
   std::string tracking_dir;  ///< --tracking-dir (empty: OUT/tracking)
   bool live_tracking = false;
-  bool realistic = false;    ///< renders with every realism effect (render.realistic=true)
+  bool realistic = true;     ///< renders with every realism effect (render.realistic=true)
+  std::string look;          ///< --realistic | --plain as given (empty: realistic)
   double first_s = 0;        ///< --duration: each robot's first S seconds (0: whole)
 };
 
@@ -408,14 +414,14 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
   if (!data.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", data.error().c_str()), 2;
   if (!variants_given) variants = split("hermes,raw,fixed_k100");
   if (!bandwidths_given) bandwidths = split("0,10,2,0.5");
-  if (out.empty()) out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set;
+  if (out.empty())
+    out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set + (o.realistic ? "_realistic" : "");
   // The tracking is recorded by the first run and replayed by the others
   // (tracking_record.h): the agents' tracking is most of a run's time.
   if (o.live_tracking) tracking_dir.clear();
   else if (tracking_dir.empty()) tracking_dir = (fs::path(out) / "tracking").string();
   const auto& [dir, seqs] = *data;
-  const std::vector<std::string> render_settings =
-      o.realistic ? std::vector<std::string>{"render.realistic=true"} : std::vector<std::string>{};
+  const std::vector<std::string> render_settings = {o.realistic ? "render.realistic=true" : render::kPlainLook};
   if (Status s = system::ensureWholeRenders(dir, seqs, groundTruthDir(), rate, render_settings); !s)
     return std::fprintf(stderr, "hermes_bench_system: %s\n", s.error().c_str()), 1;
   Robots robots;
@@ -543,8 +549,12 @@ int main(int argc, char** argv) {
       full.live_tracking = true;
     } else if (opt.is("--tracking-dir")) {
       full.tracking_dir = opt.value();
-    } else if (opt.is("--realistic")) {
-      full.realistic = true;
+    } else if (opt.is("--realistic") || opt.is("--plain")) {
+      const std::string flag = opt.is("--plain") ? "--plain" : "--realistic";
+      if (!full.look.empty() && full.look != flag)
+        return std::fprintf(stderr, "hermes_bench_system: --realistic and --plain exclude each other\n"), 2;
+      full.look = flag;
+      full.realistic = flag == "--realistic";
     } else if (opt.is("--set")) {
       overrides.push_back(opt.value());
     } else if (opt.is("--json")) {
@@ -567,8 +577,8 @@ int main(int argc, char** argv) {
     return std::fprintf(stderr, "hermes_bench_system: --full and --swarm are two different tables; give one\n"), 2;
   if (!full.out.empty() && full.set.empty())
     return std::fprintf(stderr, "hermes_bench_system: --out is --full's store folder; give --full too\n"), 2;
-  if ((full.live_tracking || !full.tracking_dir.empty() || full.realistic) && full.set.empty())
-    return std::fprintf(stderr, "hermes_bench_system: --live-tracking / --tracking-dir / --realistic belong to --full\n"), 2;
+  if ((full.live_tracking || !full.tracking_dir.empty() || !full.look.empty()) && full.set.empty())
+    return std::fprintf(stderr, "hermes_bench_system: --live-tracking / --tracking-dir / --realistic / --plain belong to --full\n"), 2;
   if (!run_out.empty() && swarm.empty())
     return std::fprintf(stderr, "hermes_bench_system: --run-out belongs to --swarm (--full keeps every run in --out)\n"), 2;
   if (!full.set.empty()) {

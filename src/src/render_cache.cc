@@ -41,6 +41,13 @@ Expected<std::string> renderFingerprint(const RenderRequest& req) {
   return s->fingerprint();
 }
 
+bool isPlainLook(const RenderRequest& req, const std::string& fingerprint) {
+  RenderRequest plain = req;
+  plain.settings = {render::kPlainLook};
+  auto f = renderFingerprint(plain);
+  return f.ok() && *f == fingerprint;
+}
+
 Status renderCached(const RenderRequest& req, const std::string& folder) {
   const fs::path done(folder);
   auto fingerprint = renderFingerprint(req);
@@ -49,8 +56,8 @@ Status renderCached(const RenderRequest& req, const std::string& folder) {
     if (fs::exists(done / "render_config.yaml")) {
       if (readText(done / "render_config.yaml") == *fingerprint) return Status::Ok();
       std::fprintf(stderr, "[render] %s was rendered with other settings: rendering again\n", folder.c_str());
-    } else if (req.settings.empty()) {
-      return Status::Ok();  // rendered before the settings file existed, with the default look
+    } else if (isPlainLook(req, *fingerprint)) {
+      return Status::Ok();  // rendered before the settings file existed, with the plain look
     }
   }
   if (req.trajectories.empty()) return Error{"render " + folder + ": no trajectory given"};

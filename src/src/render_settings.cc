@@ -26,6 +26,7 @@ void applyRealisticPreset(SceneParams* scene, SensorParams* sensor) {
 }
 
 Status RenderSettings::read(const Config& c) {
+  realistic = true;  // realistic by default: the look the evaluation is judged on (issue 18)
   if (Status st = c.get("render.realistic", &realistic); !st) return st;
   if (realistic) applyRealisticPreset(&scene, &sensor);
   if (Status st = scene.read(c, "render.scene"); !st) return st;

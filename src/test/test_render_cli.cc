@@ -90,7 +90,8 @@ TEST(RenderCli, TumLayoutAndDeterminism) {
   const std::string b = ::testing::TempDir() + "/render_cli_tum_b";
   fs::remove_all(a);
   fs::remove_all(b);
-  const std::string args = "--trajectory " + kGt + " --format tum --start 30 --duration 0.5 --rate 4 --width 160 --height 120 --out ";
+  const std::string args =
+      "--trajectory " + kGt + " --format tum --start 30 --duration 0.5 --rate 4 --width 160 --height 120 --plain --out ";
   ASSERT_EQ(run(args + a), 0);
   ASSERT_EQ(run(args + b), 0);
   const YAML::Node cam = YAML::LoadFile(a + "/MH_01_easy/camera.yaml");
@@ -136,7 +137,7 @@ TEST(RenderCli, PoorFractionFlattensTheTexture) {
   const std::string poor = ::testing::TempDir() + "/render_cli_poor";
   fs::remove_all(rich);
   fs::remove_all(poor);
-  const std::string args = "--trajectory " + kGt + " --duration 0.25 --rate 4 --width 188 --height 120 --no-noise";
+  const std::string args = "--trajectory " + kGt + " --duration 0.25 --rate 4 --width 188 --height 120 --no-noise --plain";
   ASSERT_EQ(run(args + " --out " + rich), 0);
   ASSERT_EQ(run(args + " --poor-fraction 1 --out " + poor), 0);
   const double g_rich = firstImageGradient(rich), g_poor = firstImageGradient(poor);
@@ -162,7 +163,7 @@ TEST(RenderCli, BadArgumentsExitTwo) {
 }
 
 TEST(RenderCli, RealisticPresetAndSettingsAreRecorded) {
-  // --realistic switches every effect on, --set overrides one, and the settings
+  // --realistic (the default) switches every effect on, --set overrides one, and the settings
   // used land in render_config.yaml (what the render cache compares).
   const std::string out = ::testing::TempDir() + "/render_cli_realistic";
   fs::remove_all(out);
@@ -176,7 +177,43 @@ TEST(RenderCli, RealisticPresetAndSettingsAreRecorded) {
   EXPECT_TRUE(cfg["render"]["scene"]["aliasing"].as<bool>());
   EXPECT_DOUBLE_EQ(cfg["render"]["sensor"]["exposure_s"].as<double>(), 0.004);
   EXPECT_GT(firstImageGradient(out), 0);
+  // Without a flag the render is realistic; --plain switches every effect off.
+  const std::string plain = out + "_plain", dflt = out + "_default";
+  fs::remove_all(plain);
+  fs::remove_all(dflt);
+  ASSERT_EQ(run(args + " --out " + dflt), 0);
+  EXPECT_TRUE(YAML::LoadFile(dflt + "/render_config.yaml")["render"]["sensor"]["motion_blur"].as<bool>());
+  ASSERT_EQ(run(args + " --plain --out " + plain), 0);
+  const YAML::Node p = YAML::LoadFile(plain + "/render_config.yaml");
+  EXPECT_FALSE(p["render"]["realistic"].as<bool>());
+  EXPECT_FALSE(p["render"]["sensor"]["motion_blur"].as<bool>());
+  EXPECT_FALSE(p["render"]["scene"]["dark_regions"].as<bool>());
+  EXPECT_EQ(run(args + " --plain --realistic --out " + plain), 2);
   EXPECT_EQ(run(args + " --set render.sensor.no_such_key=1 --out " + out), 2);
   EXPECT_EQ(run(args + " --set render.sensor.exposure_s=1 --out " + out), 2);
   EXPECT_EQ(run(args + " --set exposure_s --out " + out), 2);
+}
+
+TEST(RenderCli, JobsDoNotChangeTheOutput) {
+  // Two robots rendered one after the other and at once: the same bytes.
+  const std::string gt2 = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_02_easy.txt";
+  const std::string base = ::testing::TempDir() + "/render_cli_jobs";
+  const std::string args = "--trajectory " + kGt + " --trajectory " + gt2 +
+                           " --start 20 --duration 0.5 --rate 4 --width 188 --height 120 --out ";
+  fs::remove_all(base + "1");
+  fs::remove_all(base + "2");
+  ASSERT_EQ(run(args + base + "1 --jobs 1"), 0);
+  ASSERT_EQ(run(args + base + "2 --jobs 2"), 0);
+  int compared = 0;
+  for (const char* stem : {"MH_01_easy", "MH_02_easy"})
+    for (const auto& e : fs::directory_iterator(base + "1/" + stem + "/mav0/cam1/data")) {
+      const std::string other = base + "2/" + stem + "/mav0/cam1/data/" + e.path().filename().string();
+      const cv::Mat a = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+      const cv::Mat b = cv::imread(other, cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(a.empty() || b.empty()) << other;
+      EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0) << other;
+      ++compared;
+    }
+  EXPECT_EQ(compared, 4);
+  EXPECT_EQ(run(args + base + "2 --jobs 0"), 2);
 }

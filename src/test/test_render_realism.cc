@@ -210,25 +210,38 @@ TEST(RenderRealism, SettingsErrorsNameTheKey) {
   ASSERT_TRUE(s.ok()) << s.error();
   EXPECT_TRUE(s->sensor.motion_blur && s->sensor.photon_noise && s->scene.dark_regions && s->scene.moving_objects > 0);
   EXPECT_FALSE(s->scene.aliasing);
-  // Defaults: every effect off (the look every cached render and accuracy test uses).
+  // By default every effect is on; the plain look (what the accuracy tests pin)
+  // has every one off.
   auto d = readRenderSettings(Config(), {});
   ASSERT_TRUE(d.ok());
-  EXPECT_FALSE(d->sensor.motion_blur || d->sensor.photon_noise || d->scene.dark_regions || d->scene.aliasing ||
-               d->scene.grain || d->scene.moving_objects > 0);
+  EXPECT_TRUE(d->realistic && d->sensor.motion_blur && d->sensor.photon_noise && d->scene.dark_regions &&
+              d->scene.aliasing && d->scene.grain && d->scene.moving_objects > 0);
+  auto p = readRenderSettings(Config(), {kPlainLook});
+  ASSERT_TRUE(p.ok());
+  EXPECT_FALSE(p->realistic || p->sensor.motion_blur || p->sensor.photon_noise || p->scene.dark_regions ||
+               p->scene.aliasing || p->scene.grain || p->scene.moving_objects > 0);
+  EXPECT_EQ(p->fingerprint(), RenderSettings{}.fingerprint());
 }
 
 TEST(RenderRealism, CacheFingerprintCoversEverySetting) {
   RenderRequest a;
+  a.settings = {kPlainLook};
   auto fa = renderFingerprint(a);
   ASSERT_TRUE(fa.ok());
   for (const char* kv : {"render.sensor.exposure_s=0.004", "render.scene.dark_level=0.3",
                                 "render.sensor.photon_gain=0.01", "render.realistic=true"}) {
     RenderRequest b;
-    b.settings = {kv};
+    b.settings = {kPlainLook, kv};
     auto fb = renderFingerprint(b);
     ASSERT_TRUE(fb.ok()) << fb.error();
     EXPECT_NE(*fa, *fb) << kv;
   }
+  EXPECT_TRUE(isPlainLook(a, *fa));
+  RenderRequest d;  // no settings: the realistic look
+  auto fd = renderFingerprint(d);
+  ASSERT_TRUE(fd.ok());
+  EXPECT_NE(*fd, *fa);
+  EXPECT_FALSE(isPlainLook(d, *fd));
   RenderRequest c;
   c.settings = {"render.sensor.no_such_key=1"};
   EXPECT_FALSE(renderFingerprint(c).ok());

@@ -40,7 +40,8 @@ const char* kUsage =
     "                            [--fast-threshold T] [--set key=value ...]\n"
     "Compares real EuRoC frames (DIR/mav0/cam{0,1}/data/*.png; default the shared\n"
     "V1_01 micro clip) with frames rendered along TUM (default V1_01_easy ground\n"
-    "truth): the default look and the realism preset (render.realistic=true, with\n"
+    "truth): the plain look (render.realistic=false; named rendered_default) and the\n"
+    "realism preset (render.realistic=true, the default of hermes_sim; with\n"
     "--set overrides). N frames per variant (default 40, spread over the trajectory;\n"
     "a quarter of them also as static pairs for the noise). Stats per quarter frame;\n"
     "'inside' = the rendered median lies in the real [min, max].\n";

@@ -44,10 +44,12 @@ int main(int argc, char** argv) {
     const std::string a = argv[i];
     if (a == "--help") {
       std::puts("usage: hermes_bench_render [--json FILE] [--frames N] [--trajectory TUM]\n"
-                "                           [--realistic] [--set key=value ...]\n"
-                "  --realistic / --set: render settings as hermes_sim takes them (render.realistic=true)");
+                "                           [--realistic | --plain] [--set key=value ...]\n"
+                "  --realistic (the default) / --plain / --set: render settings as hermes_sim takes them\n"
+                "  (render.realistic=true / false)");
       return 0;
     } else if (a == "--realistic") sets.push_back("render.realistic=true");
+    else if (a == "--plain") sets.push_back(render::kPlainLook);
     else if (a == "--set" && i + 1 < argc) sets.push_back(argv[++i]);
     else if (a == "--json" && i + 1 < argc) json_out = argv[++i];
     else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));

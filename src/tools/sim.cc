@@ -1,13 +1,16 @@
 // hermes_sim: renders stereo (EuRoC layout) or RGB-D (TUM layout) sequences
 // along ground-truth trajectories inside one shared procedural scene.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -25,8 +28,8 @@ namespace {
 const char* kUsage =
     "usage: hermes_sim --trajectory GT.txt [--trajectory GT2.txt ...] --out DIR\n"
     "                  [--format euroc|tum] [--start S] [--duration S] [--rate HZ] [--seed N]\n"
-    "                  [--width W --height H] [--no-noise] [--png-compression 0-9]\n"
-    "                  [--poor-fraction F] [--realistic] [--config FILE] [--set key=value ...]\n"
+    "                  [--width W --height H] [--no-noise] [--png-compression 0-9] [--jobs N]\n"
+    "                  [--poor-fraction F] [--realistic | --plain] [--config FILE] [--set key=value ...]\n"
     "Renders one dataset folder per trajectory (TUM file of the body/IMU pose, e.g.\n"
     "shared/data/euroc_gt/MH_01_easy.txt) under DIR/<trajectory stem>, all inside ONE\n"
     "procedural scene enclosing every trajectory; the scene is described in DIR/scene.json.\n"
@@ -37,13 +40,17 @@ const char* kUsage =
     "       5000 per metre), rgb.txt, depth.txt, groundtruth.txt (CAMERA pose), camera.yaml\n"
     "--start/--duration: seconds from each trajectory's first pose (default: all of it).\n"
     "--seed: scene and sensor seed (default 1); output is byte-identical for a seed.\n"
+    "--jobs: trajectories rendered at once, one thread each (default 1; the output\n"
+    "  does not depend on it).\n"
     "--poor-fraction: share in [0, 1] of the wall/object panels left near-uniform\n"
     "  (texture-poor) on the textured faces (default 0.25; one wall and about a fifth\n"
     "  of the objects are poor regardless). Higher values give views that alternate\n"
     "  between rich and poor texture (e.g. 0.7 for keyframe-policy ablations).\n"
-    "--realistic: the realism preset (render.realistic: true): photon + read noise at\n"
-    "  the levels measured on real EuRoC frames, motion blur over the exposure, dark\n"
-    "  regions, surface grain, aliasing copies and moving objects. Each effect has its\n"
+    "--realistic (the default; render.realistic: true): the realism preset: photon +\n"
+    "  read noise at the levels measured on real EuRoC frames, motion blur over the\n"
+    "  exposure, dark regions, surface grain, aliasing copies and moving objects.\n"
+    "--plain (render.realistic: false): every effect off, the look of the renders\n"
+    "  the accuracy tests use and of figures made before it was the default. Each effect has its\n"
     "  own key: render.sensor.{photon_noise, photon_gain, noise_sigma, brightness,\n"
     "  motion_blur, exposure_s, blur_max_taps}, render.scene.{dark_regions, dark_zones,\n"
     "  dark_radius_m, dark_level, grain, grain_sigma, grain_scale_texels, aliasing,\n"
@@ -68,8 +75,10 @@ int main(int argc, char** argv) {
   std::vector<std::string> traj_paths;
   std::string out, format = "euroc";
   double start = 0, duration = -1, rate = -1, seed_d = 1, width = -1, height = -1, comp = 1;
+  double jobs = 1;
   double poor_fraction = render::SceneParams().poor_fraction;
-  bool noise = true, realistic = false, poor_given = false;
+  bool noise = true, poor_given = false;
+  std::string look;  // --realistic | --plain (empty: render.realistic from the config, default true)
   std::string config_path;
   std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
@@ -85,15 +94,16 @@ int main(int argc, char** argv) {
       return 0;
     } else if (a == "--no-noise") {
       noise = false;
-    } else if (a == "--realistic") {
-      realistic = true;
+    } else if (a == "--realistic" || a == "--plain") {
+      if (!look.empty() && look != a) return usageError("--realistic and --plain exclude each other");
+      look = a;
     } else if (a == "--config" || a == "--set") {
       if (!next(&v)) return usageError(a + " needs a value");
       if (a == "--config") config_path = v;
       else sets.push_back(v);
     } else if (a == "--trajectory" || a == "--out" || a == "--format" || a == "--start" ||
                a == "--duration" || a == "--rate" || a == "--seed" || a == "--width" ||
-               a == "--height" || a == "--png-compression" || a == "--poor-fraction") {
+               a == "--height" || a == "--png-compression" || a == "--poor-fraction" || a == "--jobs") {
       if (!next(&v)) return usageError(a + " needs a value");
       if (a == "--trajectory") traj_paths.push_back(v);
       else if (a == "--out") out = v;
@@ -108,6 +118,7 @@ int main(int argc, char** argv) {
         else if (a == "--width") width = x;
         else if (a == "--height") height = x;
         else if (a == "--poor-fraction") poor_fraction = x, poor_given = true;
+        else if (a == "--jobs") jobs = x;
         else comp = x;
       }
     } else {
@@ -127,6 +138,7 @@ int main(int argc, char** argv) {
                       width != std::floor(width) || height != std::floor(height)))
     return usageError("--width/--height must be integers in [32, 4096]");
   if (comp < 0 || comp > 9 || comp != std::floor(comp)) return usageError("--png-compression must be in 0..9");
+  if (!(jobs >= 1 && jobs <= 64) || jobs != std::floor(jobs)) return usageError("--jobs must be an integer in [1, 64]");
   if (!(poor_fraction >= 0 && poor_fraction <= 1)) return usageError("--poor-fraction must be in [0, 1]");
 
   std::vector<Trajectory> trajs;
@@ -156,14 +168,14 @@ int main(int argc, char** argv) {
   // independent of --start/--duration/--format, so windows of one seed share it).
   std::vector<Vec3> positions;
   for (const Trajectory& t : trajs) render::appendRigPositions(t, {cam0.T_B_C, cam1.T_B_C}, &positions);
-  // Render settings: config file, --realistic, --set, then the plain flags.
+  // Render settings: config file, --realistic / --plain, --set, then the plain flags.
   Config cfg;
   if (!config_path.empty()) {
     auto c = Config::fromFile(config_path);
     if (!c.ok()) return usageError("--config: " + c.error());
     cfg = *c;
   }
-  if (realistic) sets.insert(sets.begin(), "render.realistic=true");
+  if (!look.empty()) sets.insert(sets.begin(), look == "--plain" ? render::kPlainLook : "render.realistic=true");
   auto read = render::readRenderSettings(cfg, sets);
   if (!read.ok()) return usageError(read.error());
   render::RenderSettings settings = *read;
@@ -210,27 +222,45 @@ int main(int argc, char** argv) {
   spec.seed = sp.seed;
   spec.png_compression = static_cast<int>(comp);
   spec.sensor = settings.sensor;
-  for (std::size_t i = 0; i < trajs.size(); ++i) {
-    const std::string dir = out + "/" + stems[i];
-    const std::string label = stems[i];
-    auto progress = [&](int done, int total, double secs) {
-      if (done % 10 == 0 || done == total)
-        std::fprintf(stderr, "\r[%s] %d / %d frames, %.1f %s/s   ", label.c_str(), done, total,
-                     done / std::max(secs, 1e-9), format == "euroc" ? "pairs" : "frames");
-      if (done == total) std::fprintf(stderr, "\n");
-    };
-    spec.seed = render::mixSeed(sp.seed, i);  // sensor noise differs between robots
-    auto st = format == "euroc"
-                  ? render::writeEurocSequence(dir, *scene, trajs[i], cam0, cam1, spec, progress)
-                  : render::writeTumSequence(dir, *scene, trajs[i], rgbd, spec, progress);
-    if (!st.ok()) {
-      std::fprintf(stderr, "hermes_sim: %s\n", st.error().c_str());
-      return 1;
+  // One sequence per worker: each has its own ray casters, movers and sensor
+  // (seeded per robot), the scene is only read, so the output does not depend
+  // on --jobs.
+  const std::size_t workers = std::min<std::size_t>(static_cast<std::size_t>(jobs), trajs.size());
+  const char* unit = format == "euroc" ? "pairs" : "frames";
+  std::mutex print;
+  std::atomic<std::size_t> next_seq{0};
+  std::atomic<bool> failed{false};
+  auto worker = [&]() {
+    for (std::size_t i = next_seq++; i < trajs.size() && !failed; i = next_seq++) {
+      const std::string dir = out + "/" + stems[i];
+      const std::string& label = stems[i];
+      auto progress = [&](int done, int total, double secs) {
+        // One robot: a progress line rewritten in place; several: a line every 100 frames.
+        const bool show = workers == 1 ? (done % 10 == 0 || done == total) : (done % 100 == 0 || done == total);
+        if (!show) return;
+        std::lock_guard<std::mutex> lock(print);
+        std::fprintf(stderr, "%s[%s] %d / %d frames, %.1f %s/s   %s", workers == 1 ? "\r" : "", label.c_str(), done,
+                     total, done / std::max(secs, 1e-9), unit, workers == 1 && done != total ? "" : "\n");
+      };
+      render::SequenceSpec mine = spec;
+      mine.seed = render::mixSeed(sp.seed, i);  // sensor noise differs between robots
+      auto st = format == "euroc" ? render::writeEurocSequence(dir, *scene, trajs[i], cam0, cam1, mine, progress)
+                                  : render::writeTumSequence(dir, *scene, trajs[i], rgbd, mine, progress);
+      std::lock_guard<std::mutex> lock(print);
+      if (!st.ok()) {
+        std::fprintf(stderr, "hermes_sim: %s\n", st.error().c_str());
+        failed = true;
+        return;
+      }
+      std::fprintf(stderr, "[%s] render %.1f %s/s, render+write %.1f %s/s\n", label.c_str(),
+                   st->frames / std::max(st->render_s, 1e-9), unit,
+                   st->frames / std::max(st->render_s + st->write_s, 1e-9), unit);
     }
-    std::fprintf(stderr, "[%s] render %.1f %s/s, render+write %.1f %s/s\n", label.c_str(),
-                 st->frames / std::max(st->render_s, 1e-9), format == "euroc" ? "pairs" : "frames",
-                 st->frames / std::max(st->render_s + st->write_s, 1e-9),
-                 format == "euroc" ? "pairs" : "frames");
-  }
+  };
+  std::vector<std::thread> pool;
+  for (std::size_t w = 1; w < workers; ++w) pool.emplace_back(worker);
+  worker();
+  for (std::thread& t : pool) t.join();
+  if (failed) return 1;
   return 0;
 }

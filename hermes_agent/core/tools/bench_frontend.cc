@@ -125,7 +125,7 @@ nlohmann::json runJson(const bench::SequenceRun& r) {
 const std::string kTrajectories = std::string(HERMES_SOURCE_DIR) + "/config/trajectories";
 
 /// The rendered moving sequence of the local-BA section.
-const bench::RenderSpec kBaSequence{"V1_01_easy", 0, 20, 0.25, 1};
+const bench::RenderSpec kBaSequence{"V1_01_easy", 0, 20, 0.25, 1, {render::kPlainLook}};  // look of its published figures
 
 /// Sequences of the keyframe-policy ablation: MH_01 in the default scene, and
 /// V1_01 in the default scene and with most panels near-uniform (views swing
@@ -266,7 +266,8 @@ int main(int argc, char** argv) {
   std::string data = std::string(env ? env : "/work/shared/data") + "/euroc_V1_01_micro/mav0";
   std::string json_out;
   std::string cache = "/tmp/hermes_bench_frontend";
-  bool render = true, ablation = false, realistic = false;
+  bool render = true, ablation = false;
+  std::string look;  // --realistic | --plain (the ablation's renders; default realistic)
   KeyframePolicyParams keyframe;
   std::vector<bench::RenderSpec> sequences;
   int max_frames = 1000;
@@ -289,8 +290,9 @@ int main(int argc, char** argv) {
              "(first run renders about 2600 stereo pairs: ~10 min)\n"
              "--sequence STEM,START,DURATION,POOR_FRACTION: ablate this slice of "
              "config/trajectories/STEM.txt instead (repeatable), e.g. V1_01_easy,0,40,0.85\n"
-             "--realistic: the ablation's renders with render.realistic=true (blur, exposure, "
-             "noise, dark regions, aliasing, moving objects; cached apart)\n"
+             "--realistic (the default) / --plain: the ablation's renders with every realism "
+             "effect (render.realistic=true: blur, exposure, noise, dark regions, aliasing, moving "
+             "objects) or none (the plain look); cached apart\n"
              "--entropy T_L,T_H,K: the entropy rule's thresholds and FIFO length for the "
              "ablation (default keyframe.ratio_low/high, entropy_window); each entropy run "
              "reports the spread of r = H / mean(FIFO) over its frames (entropy_ratio)\n";
@@ -301,8 +303,12 @@ int main(int argc, char** argv) {
       render = false;
     } else if (a == "--ablation") {
       ablation = true;
-    } else if (a == "--realistic") {
-      realistic = true;
+    } else if (a == "--realistic" || a == "--plain") {
+      if (!look.empty() && look != a) {
+        std::cerr << "hermes_bench_frontend: --realistic and --plain exclude each other\n";
+        return 2;
+      }
+      look = a;
     } else if (a == "--entropy" && i + 1 < argc) {
       const std::string v = argv[++i];
       if (std::sscanf(v.c_str(), "%lf,%lf,%d", &keyframe.ratio_low, &keyframe.ratio_high,
@@ -333,14 +339,14 @@ int main(int argc, char** argv) {
     std::cerr << "hermes_bench_frontend: --sequence belongs to --ablation\n";
     return 2;
   }
-  if ((realistic || argv_has_entropy(argc, argv)) && !ablation) {
-    std::cerr << "hermes_bench_frontend: --realistic and --entropy belong to --ablation\n";
+  if ((!look.empty() || argv_has_entropy(argc, argv)) && !ablation) {
+    std::cerr << "hermes_bench_frontend: --realistic, --plain and --entropy belong to --ablation\n";
     return 2;
   }
   if (ablation) {
     std::vector<bench::RenderSpec> specs = sequences.empty() ? kAblationSequences : sequences;
-    if (realistic)
-      for (bench::RenderSpec& s : specs) s.settings.push_back("render.realistic=true");
+    if (look == "--plain")
+      for (bench::RenderSpec& s : specs) s.settings.push_back(render::kPlainLook);
     return runAblation(specs, cache, json_out, keyframe);
   }
   auto c0 = readSensorYaml(data + "/cam0/sensor.yaml");

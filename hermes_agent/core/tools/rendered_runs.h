@@ -19,6 +19,7 @@
 #include "hermes/core/crc32.h"
 #include "hermes/core/dataset.h"
 #include "hermes/core/evaluation.h"
+#include "hermes/core/render/settings.h"
 #include "hermes/core/render_cache.h"
 
 namespace hermes::bench {
@@ -30,16 +31,22 @@ struct RenderSpec {
   double duration_s = 20;      ///< [s]
   double poor_fraction = 0.25; ///< hermes_sim --poor-fraction (0.25 = its default scene)
   int seed = 1;
-  std::vector<std::string> settings;  ///< hermes_sim --set key=value (e.g. render.realistic=true)
+  /// hermes_sim --set key=value; none: the realistic look, {render::kPlainLook}: the plain one
+  std::vector<std::string> settings;
 
+  /// The cache folder's name. The plain look has no suffix (it was the default
+  /// when these folders were first made); no settings means realistic and is
+  /// named as render.realistic=true always was.
   std::string key() const {
     char buf[256];
     std::snprintf(buf, sizeof buf, "%s_s%g_d%g_pf%g_seed%d", stem.c_str(), start_s, duration_s,
                   poor_fraction, seed);
     std::string k = buf;
-    if (!settings.empty()) {  // the folder also records them (render_config.yaml)
+    const std::vector<std::string> named =
+        settings.empty() ? std::vector<std::string>{"render.realistic=true"} : settings;
+    if (named != std::vector<std::string>{render::kPlainLook}) {  // the folder also records them
       std::string all;
-      for (const std::string& s : settings) all += s + ";";
+      for (const std::string& s : named) all += s + ";";
       std::snprintf(buf, sizeof buf, "_set%08x", crc32(all.data(), all.size()));
       k += buf;
     }

@@ -41,7 +41,7 @@ std::string renderOnce(const std::string& name, const std::vector<std::string>& 
 }  // namespace
 
 std::string renderedHall() {
-  return renderOnce("hall_d10_r10_s1", hallSequences(), "--duration 10 --rate 10 --seed 1");
+  return renderOnce("hall_d10_r10_s1", hallSequences(), "--duration 10 --rate 10 --seed 1 --plain");
 }
 
 const std::vector<std::string>& meetingSequences() {
@@ -51,7 +51,7 @@ const std::vector<std::string>& meetingSequences() {
 
 std::string renderedMeeting() {
   return renderOnce("meeting_s40_d30_r10_s1", meetingSequences(),
-                    "--start 40 --duration 30 --rate 10 --seed 1");
+                    "--start 40 --duration 30 --rate 10 --seed 1 --plain");
 }
 
 }  // namespace hermes::test_support

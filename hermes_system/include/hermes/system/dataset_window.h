@@ -28,8 +28,10 @@ Expected<WindowInfo> writeEurocWindow(const std::string& source, double start_s,
 /// Makes sure `data` holds whole-sequence renders of every one of `sequences`
 /// (<data>/<sequence>/mav0): if one is missing, renders all of them in one
 /// scene from `trajectories_dir`/<sequence>.txt at `rate_hz` (render_cache.h).
-/// With `settings` (hermes_sim --set, e.g. render.realistic=true), a render made
-/// with other settings is made again (render_config.yaml is compared).
+/// `settings` are hermes_sim --set overrides: none gives the realistic look,
+/// {render::kPlainLook} the plain one. A render made with other settings is made
+/// again (render_config.yaml is compared); a plain-look folder from before that
+/// file existed counts when every sequence is there.
 Status ensureWholeRenders(const std::string& data, const std::vector<std::string>& sequences,
                           const std::string& trajectories_dir, double rate_hz,
                           const std::vector<std::string>& settings = {});

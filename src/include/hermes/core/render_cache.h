@@ -4,7 +4,8 @@
 // one. A folder holding a `done` marker counts as cached when its
 // render_config.yaml (every scene and sensor setting, written by hermes_sim)
 // equals the request's; otherwise it is rendered again. Folders from before
-// render_config.yaml existed count only for requests without settings.
+// render_config.yaml existed count only for requests of the plain look
+// (render::kPlainLook; without settings a request is realistic).
 #pragma once
 
 #include <string>
@@ -27,6 +28,9 @@ struct RenderRequest {
 /// The render_config.yaml text hermes_sim writes for `req` (or an error
 /// naming a bad setting).
 Expected<std::string> renderFingerprint(const RenderRequest& req);
+
+/// Whether `fingerprint` (of `req`) is the plain look: every realism effect off.
+bool isPlainLook(const RenderRequest& req, const std::string& fingerprint);
 
 /// `folder`, rendering `req` into it first unless a finished render is there.
 /// The render's output goes to `folder`.log. Errors name the failing command.
