@@ -2,8 +2,9 @@
 # ./hermes demo: the whole system on one machine, no downloads but Debian packages.
 # Installs what is missing (the ROS-free core packages), builds the ROS-free tools,
 # renders three robots in one synthetic hall (EuRoC MH_01..03 ground-truth
-# trajectories from 20 s, where they fly: 2, 7.5 and 39 m in 30 s; cached in
-# data_cache/demo after the first run), runs the three agents and the edge
+# trajectories from 20 s, where they fly: 2, 7.5 and 39 m in 30 s; realistic
+# look: motion blur, photon noise, dark regions, aliasing copies, moving objects;
+# cached in data_cache/demo after the first run), runs the three agents and the edge
 # server in one process over ONE emulated 10 Mbit/s link they all share, and
 # prints the report (merged agents, ATE per agent and merged, bytes, kB/s, loops)
 # with the paths of the plots.
@@ -19,17 +20,20 @@ BANDWIDTH=10
 
 usage() {
   cat <<'H'
-usage: ./hermes demo [--out DIR] [--start S] [--duration S] [--rate HZ] [--bandwidth MBITPS] [--fresh] [--json]
+usage: ./hermes demo [--out DIR] [--start S] [--duration S] [--rate HZ] [--bandwidth MBITPS] [--plain] [--fresh] [--json]
   Installs what is missing (apt, ROS-free core only), builds, renders three robots
   (EuRoC MH_01..03 trajectories from --start 20 s for --duration 30 s at --rate 20 Hz;
-  cached in data_cache/demo/s<start>_d<duration>_r<rate> after the first run), runs
+  realistic renders (hermes_sim's default), cached in
+  data_cache/demo/s<start>_d<duration>_r<rate>_realistic after the first run), runs
   3 agents + the server over one shared emulated link (default 10 Mbit/s) on a
   simulated clock, prints the report and writes plots under OUT (default results/demo).
+  --plain: the plain look instead (every realism effect off; cached in .../s<start>_d<duration>_r<rate>).
   --fresh: render again.  --json: print the metrics JSON instead of the report.
 H
 }
 FRESH=0
 JSON=0
+LOOK=realistic
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --help|-h) usage; exit 0 ;;
@@ -39,6 +43,7 @@ while [[ $# -gt 0 ]]; do
     --rate) RATE="$2"; shift 2 ;;
     --bandwidth) BANDWIDTH="$2"; shift 2 ;;
     --fresh) FRESH=1; shift ;;
+    --plain) LOOK=plain; shift ;;
     --json) JSON=1; shift ;;
     *) echo "hermes demo: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -57,12 +62,24 @@ for v in "$START" "$DURATION" "$RATE" "$BANDWIDTH"; do
   [[ "$v" =~ ^[0-9]+([.][0-9]+)?$ ]] || { echo "hermes demo: '$v' is not a number (see --help)" >&2; exit 2; }
 done
 KEY="s${START}_d${DURATION}_r${RATE}"
+[[ $LOOK == realistic ]] && KEY+="_realistic"
+JOBS=$(nproc 2>/dev/null || echo 1); (( JOBS > 3 )) && JOBS=3
 if [[ $FRESH -eq 1 || ! -f "$CACHE/$KEY.done" ]]; then
-  echo "[demo] rendering 3 robots x ${DURATION} s from ${START} s at ${RATE} Hz (cached afterwards)"
+  echo "[demo] rendering 3 robots x ${DURATION} s from ${START} s at ${RATE} Hz, ${LOOK} look, ${JOBS} at once (cached afterwards)"
   rm -rf "${CACHE:?}/$KEY"
+  LOG="$CACHE/$KEY.log"
   "$BIN/hermes_sim" --trajectory "$GT_DIR/MH_01_easy.txt" --trajectory "$GT_DIR/MH_02_easy.txt" \
     --trajectory "$GT_DIR/MH_03_medium.txt" --out "$CACHE/$KEY" --format euroc \
-    --start "$START" --duration "$DURATION" --rate "$RATE" --seed 1 2>&1 | tr '\r' '\n' | grep -E 'render [0-9.]+ pairs/s' || true
+    --start "$START" --duration "$DURATION" --rate "$RATE" --seed 1 --jobs "$JOBS" --"$LOOK" >"$LOG" 2>&1 &
+  SIM=$!
+  SHOWN=""
+  while kill -0 "$SIM" 2>/dev/null; do   # progress every 10 s, when it moved
+    sleep 10
+    LINE="$(tr '\r' '\n' <"$LOG" | grep -E 'frames' | tail -n 2 | tr '\n' ' ' || true)"
+    if [[ -n "$LINE" && "$LINE" != "$SHOWN" ]]; then echo "[demo]   $LINE"; SHOWN="$LINE"; fi
+  done
+  wait "$SIM" || { echo "hermes demo: rendering failed (see $LOG)" >&2; exit 1; }
+  tr '\r' '\n' <"$LOG" | grep -E 'render [0-9.]+ pairs/s' || true
   touch "$CACHE/$KEY.done"
 else
   echo "[demo] using cached rendering $CACHE/$KEY"
@@ -81,7 +98,7 @@ cat <<REPORT
 
 ================ Hermes demo report ================
 $REPORT
-rendered data : $CACHE/$KEY  (3 robots, EuRoC layout, one shared hall)
+rendered data : $CACHE/$KEY  (3 robots, EuRoC layout, one shared hall, ${LOOK} look)
 metrics       : $OUT/metrics.json
 trajectories  : $OUT/trajectories/<robot>_{raw,merged,gt}.tum
 plots         : $OUT/plots/trajectories_top.png

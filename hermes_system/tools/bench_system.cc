@@ -27,6 +27,7 @@
 #include <iostream>
 #include <memory>
 #include <random>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -36,6 +37,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench_args.h"
+#include "cell_jobs.h"
 #include "hermes/core/render/settings.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/system/bench_store.h"
@@ -104,6 +106,11 @@ const char* kUsage =
     "                   corrupted run its own D with copies of the others). Each run's\n"
     "                   progress and bench_row.json say tracking record / replay.\n"
     "  --live-tracking  --full: track every run live (no recording)\n"
+    "  --jobs N         --full: N runs at once, each a child process (default 1; the\n"
+    "                   rows are the sequential ones: the runner is deterministic). The\n"
+    "                   first run of a tracking folder records it before the runs that\n"
+    "                   replay it start; a variant that changes the tracker\n"
+    "                   (covisibility) records into D/<variant>.\n"
     "  --realistic      --full (the default): renders with every realism effect\n"
     "                   (render.realistic=true: motion blur, dark regions, photon noise,\n"
     "                   aliasing copies, movers) in data_cache/<SET>_full_realistic\n"
@@ -364,8 +371,20 @@ struct FullOptions {
   bool live_tracking = false;
   bool realistic = true;     ///< renders with every realism effect (render.realistic=true)
   std::string look;          ///< --realistic | --plain as given (empty: realistic)
+  int jobs = 1;              ///< --jobs: runs at once, as child processes (cell_jobs.h)
+  bool cell = false;         ///< --cell: a child of --jobs (one run; no table, JSON or plots)
+  std::vector<std::string> argv;  ///< the command line, for the children
   double first_s = 0;        ///< --duration: each robot's first S seconds (0: whole)
 };
+
+/// The tracking folder of `variant`'s runs: a variant that changes the tracker
+/// (keyframe.* / tracker.*) records its own, in a subfolder named after it.
+std::string cellTrackingDir(const std::string& base, const std::string& variant) {
+  if (base.empty()) return base;
+  for (const std::string& s : variantSets(variant))
+    if (s.rfind("keyframe.", 0) == 0 || s.rfind("tracker.", 0) == 0) return (fs::path(base) / variant).string();
+  return base;
+}
 
 /// --full: the whole-sequence set `name` (mh | v1): render folder and sequences.
 /// Realistic renders have their own folder (<set>_full_realistic).
@@ -431,8 +450,11 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
       continue;
     }
     const fs::path view = fs::path(out) / "views" / seq;  // --duration: the first S seconds
-    auto w = system::writeEurocWindow((fs::path(dir) / seq).string(), 0, first_s, view.string());
-    if (!w.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", w.error().c_str()), 1;
+    // A --jobs child takes the view its parent wrote (its siblings read it).
+    if (!(o.cell && fs::exists(view / "mav0" / "cam0" / "data.csv"))) {
+      auto w = system::writeEurocWindow((fs::path(dir) / seq).string(), 0, first_s, view.string());
+      if (!w.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", w.error().c_str()), 1;
+    }
     robots.push_back({seq, view});
   }
   const nlohmann::json setup = {{"bench", "system_full"}, {"set", set}, {"data", dir},
@@ -446,6 +468,26 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
   for (const std::string& seq : seqs) header += " " + seq.substr(0, 5) + "(odom)";
   std::fprintf(stderr, "%-10s %6s %5s %6s%s %7s %11s %14s %5s %13s %6s\n", "variant", "Mbit/s", "merged", "ATE",
                header.c_str(), "MB", "kB/s mn/pk", "loops a/r/wrong", "lost%", "srv ms med/p95", "wall");
+  std::set<std::string> by_children;
+  if (o.jobs > 1 && !o.cell) {  // the runs not stored yet, as child processes
+    std::vector<system::bench::Cell> cells;
+    for (const std::string& v : variants)
+      for (const std::string& bw : bandwidths) {
+        char name[64];
+        std::snprintf(name, sizeof name, "%s_%g", v.c_str(), std::atof(bw.c_str()));
+        if (!store->find(name)) cells.push_back({name, v, bw, cellTrackingDir(tracking_dir, v)});
+      }
+    std::fprintf(stderr, "hermes_bench_system: %zu runs, %d at once\n", cells.size(), o.jobs);
+    const std::vector<std::string> failed = system::bench::runCellsInChildren(cells, o.jobs, o.argv);
+    for (const system::bench::Cell& c : cells) by_children.insert(c.name);
+    if (!failed.empty()) {
+      std::string list;
+      for (const std::string& f : failed) list += " " + f;
+      std::fprintf(stderr, "hermes_bench_system: runs failed:%s (the others are stored; run again to resume)\n",
+                   list.c_str());
+      return 1;
+    }
+  }
   nlohmann::json runs = nlohmann::json::array();
   std::size_t index = 0;
   const std::size_t total = variants.size() * bandwidths.size();
@@ -455,7 +497,7 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
       char name[64];
       std::snprintf(name, sizeof name, "%s_%g", v.c_str(), std::atof(bw.c_str()));
       if (auto row = store->find(name)) {
-        printFullRow(v, bw, *row, true);
+        printFullRow(v, bw, *row, !by_children.count(name));
         runs.push_back(*row);
         continue;
       }
@@ -471,7 +513,8 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
                      p.draining ? " (delivering backlog)" : "", p.frames_done, p.frames_total,
                      p.agents_merged, robots.size(), wall);
       };
-      auto j = runVariant(v, bw, robots, overrides, progress, store->runDir(name), tracking_dir, &mode);
+      auto j = runVariant(v, bw, robots, overrides, progress, store->runDir(name),
+                          cellTrackingDir(tracking_dir, v), &mode);
       if (!j.ok()) return std::fprintf(stderr, "hermes_bench_system: %s: %s\n", name, j.error().c_str()), 1;
       (*j)["run"] = name;
       if (Status s = store->save(name, *j); !s)
@@ -479,6 +522,7 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
       printFullRow(v, bw, *j, false);
       runs.push_back(*j);
     }
+  if (o.cell) return 0;  // the parent writes the table
   nlohmann::json all = setup;
   all["runs"] = runs;
   const std::string combined = (fs::path(out) / "bench_system_full.json").string();
@@ -555,6 +599,10 @@ int main(int argc, char** argv) {
         return std::fprintf(stderr, "hermes_bench_system: --realistic and --plain exclude each other\n"), 2;
       full.look = flag;
       full.realistic = flag == "--realistic";
+    } else if (opt.is("--jobs")) {
+      full.jobs = static_cast<int>(opt.whole(1, 16));
+    } else if (opt.is("--cell")) {
+      full.cell = true;
     } else if (opt.is("--set")) {
       overrides.push_back(opt.value());
     } else if (opt.is("--json")) {
@@ -577,11 +625,13 @@ int main(int argc, char** argv) {
     return std::fprintf(stderr, "hermes_bench_system: --full and --swarm are two different tables; give one\n"), 2;
   if (!full.out.empty() && full.set.empty())
     return std::fprintf(stderr, "hermes_bench_system: --out is --full's store folder; give --full too\n"), 2;
-  if ((full.live_tracking || !full.tracking_dir.empty() || !full.look.empty()) && full.set.empty())
-    return std::fprintf(stderr, "hermes_bench_system: --live-tracking / --tracking-dir / --realistic / --plain belong to --full\n"), 2;
+  if ((full.live_tracking || !full.tracking_dir.empty() || !full.look.empty() || full.jobs > 1 || full.cell) &&
+      full.set.empty())
+    return std::fprintf(stderr, "hermes_bench_system: --live-tracking / --tracking-dir / --realistic / --plain / --jobs belong to --full\n"), 2;
   if (!run_out.empty() && swarm.empty())
     return std::fprintf(stderr, "hermes_bench_system: --run-out belongs to --swarm (--full keeps every run in --out)\n"), 2;
   if (!full.set.empty()) {
+    full.argv.assign(argv, argv + argc);
     full.json_out = json_out;
     full.first_s = duration_given ? duration : 0;
     return runFull(full, variants, bandwidths, variants_given, bandwidths_given, rate, overrides);
