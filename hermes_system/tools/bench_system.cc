@@ -221,7 +221,7 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
                                     const std::function<void(const system::ProgressInfo&)>& progress,
                                     const std::string& out_dir,
                                     const std::string& tracking_dir = "",
-                                    std::string* tracking_mode = nullptr) {
+                                    std::string* tracking_mode = nullptr, bool record_only = false) {
   std::vector<std::string> sets = overrides;
   for (const std::string& s : variantSets(v)) sets.push_back(s);
   sets.push_back("link.bandwidth_mbitps=" + bw);
@@ -251,9 +251,13 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
     mode = fit ? "replay" : "record";
     params->clock.tracking_replay_dir = tracking_dir;
     if (!fit) params->clock.tracking_record_dir = tracking_dir;
-    if (!fit && fs::exists(tracking_dir))
+    if (!fit && fs::exists(tracking_dir) && !record_only)
       std::fprintf(stderr, "  %s_%s: recording the tracking again where it does not fit: %s\n",
                    v.c_str(), bw.c_str(), fit.error().c_str());
+    if (record_only && fit) {  // a --jobs recorder with nothing to do
+      if (tracking_mode) *tracking_mode = mode;
+      return nlohmann::json::object();
+    }
   }
   // One spool per process: two benchmarks may run side by side.
   const std::string spool =
@@ -373,6 +377,7 @@ struct FullOptions {
   std::string look;          ///< --realistic | --plain as given (empty: realistic)
   int jobs = 1;              ///< --jobs: runs at once, as child processes (cell_jobs.h)
   bool cell = false;         ///< --cell: a child of --jobs (one run; no table, JSON or plots)
+  std::string record_robot;  ///< --record-robot: a child of --jobs recording this robot alone
   std::vector<std::string> argv;  ///< the command line, for the children
   double first_s = 0;        ///< --duration: each robot's first S seconds (0: whole)
 };
@@ -468,15 +473,43 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
   for (const std::string& seq : seqs) header += " " + seq.substr(0, 5) + "(odom)";
   std::fprintf(stderr, "%-10s %6s %5s %6s%s %7s %11s %14s %5s %13s %6s\n", "variant", "Mbit/s", "merged", "ATE",
                header.c_str(), "MB", "kB/s mn/pk", "loops a/r/wrong", "lost%", "srv ms med/p95", "wall");
+  if (!o.record_robot.empty()) {  // a --jobs recorder: this robot alone, no row
+    Robots one;
+    for (const auto& r : robots)
+      if (r.first == o.record_robot) one.push_back(r);
+    if (one.empty()) return std::fprintf(stderr, "hermes_bench_system: --record-robot: no robot '%s'\n", o.record_robot.c_str()), 2;
+    std::string mode;
+    const auto t0 = std::chrono::steady_clock::now();
+    double last = 0;
+    auto progress = [&](const system::ProgressInfo& p) {
+      const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (wall - last < 60) return;
+      last = wall;
+      std::fprintf(stderr, "  [record %s] frames %zu/%zu  wall %.0f s\n", o.record_robot.c_str(), p.frames_done,
+                   p.frames_total, wall);
+    };
+    auto j = runVariant(variants.front(), "0", one, overrides, progress, "",
+                        cellTrackingDir(tracking_dir, variants.front()), &mode, true);
+    if (!j.ok()) return std::fprintf(stderr, "hermes_bench_system: record %s: %s\n", o.record_robot.c_str(), j.error().c_str()), 1;
+    std::fprintf(stderr, "  record %s: %s (%.0f s)\n", o.record_robot.c_str(), mode == "replay" ? "recording fits" : "recorded",
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    return 0;
+  }
   std::set<std::string> by_children;
   if (o.jobs > 1 && !o.cell) {  // the runs not stored yet, as child processes
-    std::vector<system::bench::Cell> cells;
+    std::vector<system::bench::Cell> cells, recorders;
+    std::set<std::string> dirs;
     for (const std::string& v : variants)
       for (const std::string& bw : bandwidths) {
         char name[64];
         std::snprintf(name, sizeof name, "%s_%g", v.c_str(), std::atof(bw.c_str()));
-        if (!store->find(name)) cells.push_back({name, v, bw, cellTrackingDir(tracking_dir, v)});
+        if (store->find(name)) continue;
+        const std::string td = cellTrackingDir(tracking_dir, v);
+        cells.push_back({name, v, bw, td, ""});
+        if (!td.empty() && dirs.insert(td).second)  // one recorder per robot and tracking folder
+          for (const auto& r : robots) recorders.push_back({"record_" + r.first, v, "0", td, r.first});
       }
+    cells.insert(cells.begin(), recorders.begin(), recorders.end());
     std::fprintf(stderr, "hermes_bench_system: %zu runs, %d at once\n", cells.size(), o.jobs);
     const std::vector<std::string> failed = system::bench::runCellsInChildren(cells, o.jobs, o.argv);
     for (const system::bench::Cell& c : cells) by_children.insert(c.name);
@@ -603,6 +636,8 @@ int main(int argc, char** argv) {
       full.jobs = static_cast<int>(opt.whole(1, 16));
     } else if (opt.is("--cell")) {
       full.cell = true;
+    } else if (opt.is("--record-robot")) {
+      full.record_robot = opt.value();
     } else if (opt.is("--set")) {
       overrides.push_back(opt.value());
     } else if (opt.is("--json")) {

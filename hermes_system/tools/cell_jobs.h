@@ -3,9 +3,11 @@
 // variant and bandwidth (--variants V --bandwidths B --tracking-dir D --cell);
 // it stores its row in the table's folder as a sequential run would, and the
 // offline runner is deterministic, so the rows are the ones a sequential table
-// gives. A tracking folder is written by the first cell that uses it (the
-// recorder: a robot whose recording is missing or does not fit is tracked and
-// recorded); the cells that replay it start once that cell has finished.
+// gives. Before the cells of a tracking folder start, one recorder per robot
+// (--record-robot NAME) tracks that robot alone and records it there, unless its
+// recording fits already: a robot's recording does not depend on the others or
+// on the server (a one-robot and a three-robot run record the same bytes), so
+// the recording, the slowest part of a table, runs N robots at a time too.
 // Header-only, like bench_args.h.
 #pragma once
 
@@ -26,6 +28,7 @@ struct Cell {
   std::string variant;       ///< --variants
   std::string bandwidth;     ///< --bandwidths
   std::string tracking_dir;  ///< empty: live tracking (no dependency)
+  std::string record_robot;  ///< set: a recorder of this robot (no row), not a cell
 };
 
 /// Runs every cell as `argv` + its narrowing options, at most `jobs` at once.
@@ -33,15 +36,19 @@ struct Cell {
 inline std::vector<std::string> runCellsInChildren(const std::vector<Cell>& cells, int jobs,
                                                    const std::vector<std::string>& argv) {
   std::vector<std::string> failed;
-  std::set<std::string> recorded;   // tracking folders whose recorder has finished
-  std::set<std::string> recording;  // ... whose recorder runs
+  std::map<std::string, int> recorders_left;  // per tracking folder: recorders not finished
+  std::set<std::string> broken;               // tracking folders a recorder failed for
   std::map<pid_t, const Cell*> running;
   std::vector<const Cell*> waiting;
-  for (const Cell& c : cells) waiting.push_back(&c);
+  for (const Cell& c : cells) {
+    waiting.push_back(&c);
+    if (!c.record_robot.empty()) ++recorders_left[c.tracking_dir];
+  }
   auto launch = [&](const Cell& c) {
     std::vector<std::string> args = argv;
     args.insert(args.end(), {"--variants", c.variant, "--bandwidths", c.bandwidth});
     if (!c.tracking_dir.empty()) args.insert(args.end(), {"--tracking-dir", c.tracking_dir});
+    if (!c.record_robot.empty()) args.insert(args.end(), {"--record-robot", c.record_robot});
     args.push_back("--cell");
     const pid_t pid = ::fork();
     if (pid == 0) {
@@ -61,21 +68,18 @@ inline std::vector<std::string> runCellsInChildren(const std::vector<Cell>& cell
                  running.size());
   };
   while (!waiting.empty() || !running.empty()) {
-    // Start what may start: a cell whose tracking folder is recorded, or the first
-    // cell of a folder nobody records yet (it becomes the recorder).
+    // Recorders start at once; a cell once its tracking folder's recorders are done.
     for (auto it = waiting.begin(); it != waiting.end() && static_cast<int>(running.size()) < jobs;) {
       const Cell& c = **it;
-      const bool free = c.tracking_dir.empty() || recorded.count(c.tracking_dir);
-      const bool recorder = !free && !recording.count(c.tracking_dir);
-      if (!free && !recorder) {
+      const bool ready = !c.record_robot.empty() || c.tracking_dir.empty() || recorders_left[c.tracking_dir] == 0;
+      if (!ready || broken.count(c.tracking_dir)) {
         ++it;
         continue;
       }
-      if (recorder) recording.insert(c.tracking_dir);
       launch(c);
       it = waiting.erase(it);
     }
-    if (running.empty()) break;  // nothing runs and nothing may start: cannot happen
+    if (running.empty()) break;  // what waits cannot start (a recorder failed)
     int status = 0;
     const pid_t pid = ::waitpid(-1, &status, 0);
     if (pid < 0) break;
@@ -86,9 +90,9 @@ inline std::vector<std::string> runCellsInChildren(const std::vector<Cell>& cell
     const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
     if (!ok) failed.push_back(c.name);
     std::fprintf(stderr, "hermes_bench_system: %s %s\n", c.name.c_str(), ok ? "finished" : "FAILED");
-    if (recording.count(c.tracking_dir)) {  // its replayers may start (or record themselves)
-      recording.erase(c.tracking_dir);
-      recorded.insert(c.tracking_dir);
+    if (!c.record_robot.empty()) {
+      --recorders_left[c.tracking_dir];
+      if (!ok) broken.insert(c.tracking_dir);  // its cells would record it all at once: not started
     }
   }
   for (const Cell* c : waiting) failed.push_back(c->name + " (not started)");
