@@ -509,6 +509,9 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
         if (!td.empty() && dirs.insert(td).second)  // one recorder per robot and tracking folder
           for (const auto& r : robots) recorders.push_back({"record_" + r.first, v, "0", td, r.first});
       }
+    // Longest first, so that the last runs to finish are short ones: raw streaming's
+    // server is the slowest (25 min unlimited on whole MH against 2-10 for the others).
+    std::stable_partition(cells.begin(), cells.end(), [](const system::bench::Cell& c) { return c.variant == "raw"; });
     cells.insert(cells.begin(), recorders.begin(), recorders.end());
     std::fprintf(stderr, "hermes_bench_system: %zu runs, %d at once\n", cells.size(), o.jobs);
     const std::vector<std::string> failed = system::bench::runCellsInChildren(cells, o.jobs, o.argv);
