@@ -1,11 +1,13 @@
 #include "hermes/core/render_cache.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
 #include <sstream>
+#include <thread>
 
 #include <unistd.h>
 
@@ -77,6 +79,9 @@ Status renderCached(const RenderRequest& req, const std::string& folder) {
   if (req.rate_hz > 0) cmd += number("--rate", req.rate_hz);
   if (req.poor_fraction >= 0) cmd += number("--poor-fraction", req.poor_fraction);
   for (const std::string& kv : req.settings) cmd += " --set " + quote(kv);
+  // Robots rendered at once, one per core (the bytes do not depend on it).
+  const std::size_t cores = std::max(1u, std::thread::hardware_concurrency());
+  cmd += " --jobs " + std::to_string(std::min<std::size_t>({cores, req.trajectories.size(), 64}));
   std::fprintf(stderr, "[render] %zu trajectories into %s (log %s)\n", req.trajectories.size(),
                folder.c_str(), log.c_str());
   fs::create_directories(done.parent_path(), ec);

@@ -32,7 +32,8 @@ Expected<std::string> renderFingerprint(const RenderRequest& req);
 /// Whether `fingerprint` (of `req`) is the plain look: every realism effect off.
 bool isPlainLook(const RenderRequest& req, const std::string& fingerprint);
 
-/// `folder`, rendering `req` into it first unless a finished render is there.
+/// `folder`, rendering `req` into it first unless a finished render is there
+/// (one robot per core at once: hermes_sim --jobs).
 /// The render's output goes to `folder`.log. Errors name the failing command.
 Status renderCached(const RenderRequest& req, const std::string& folder);
 
