@@ -107,10 +107,10 @@ const char* kUsage =
     "                   progress and bench_row.json say tracking record / replay.\n"
     "  --live-tracking  --full: track every run live (no recording)\n"
     "  --jobs N         --full: N runs at once, each a child process (default 1; the\n"
-    "                   rows are the sequential ones: the runner is deterministic). The\n"
-    "                   first run of a tracking folder records it before the runs that\n"
-    "                   replay it start; a variant that changes the tracker\n"
-    "                   (covisibility) records into D/<variant>.\n"
+    "                   rows are the sequential ones: the runner is deterministic). Each\n"
+    "                   robot's tracking is first recorded alone (N robots at a time)\n"
+    "                   unless its recording fits; the runs replay it. A variant that\n"
+    "                   changes the tracker (covisibility) records into D/<variant>.\n"
     "  --realistic      --full (the default): renders with every realism effect\n"
     "                   (render.realistic=true: motion blur, dark regions, photon noise,\n"
     "                   aliasing copies, movers) in data_cache/<SET>_full_realistic\n"
@@ -373,12 +373,14 @@ struct FullOptions {
   std::string json_out;      ///< --json
   std::string tracking_dir;  ///< --tracking-dir (empty: OUT/tracking)
   bool live_tracking = false;
-  bool realistic = true;     ///< renders with every realism effect (render.realistic=true)
   std::string look;          ///< --realistic | --plain as given (empty: realistic)
   int jobs = 1;              ///< --jobs: runs at once, as child processes (cell_jobs.h)
   bool cell = false;         ///< --cell: a child of --jobs (one run; no table, JSON or plots)
   std::string record_robot;  ///< --record-robot: a child of --jobs recording this robot alone
   std::vector<std::string> argv;  ///< the command line, for the children
+
+  /// Renders with every realism effect (render.realistic=true) unless --plain.
+  bool realistic() const { return look != "--plain"; }
   double first_s = 0;        ///< --duration: each robot's first S seconds (0: whole)
 };
 
@@ -434,18 +436,18 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
   std::string& out = o.out;
   std::string& tracking_dir = o.tracking_dir;
   const double first_s = o.first_s;
-  auto data = fullSet(set, o.realistic);
+  auto data = fullSet(set, o.realistic());
   if (!data.ok()) return std::fprintf(stderr, "hermes_bench_system: %s\n", data.error().c_str()), 2;
   if (!variants_given) variants = split("hermes,raw,fixed_k100");
   if (!bandwidths_given) bandwidths = split("0,10,2,0.5");
   if (out.empty())
-    out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set + (o.realistic ? "_realistic" : "");
+    out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set + (o.realistic() ? "_realistic" : "");
   // The tracking is recorded by the first run and replayed by the others
   // (tracking_record.h): the agents' tracking is most of a run's time.
   if (o.live_tracking) tracking_dir.clear();
   else if (tracking_dir.empty()) tracking_dir = (fs::path(out) / "tracking").string();
   const auto& [dir, seqs] = *data;
-  const std::vector<std::string> render_settings = {o.realistic ? "render.realistic=true" : render::kPlainLook};
+  const std::vector<std::string> render_settings = {o.realistic() ? "render.realistic=true" : render::kPlainLook};
   if (Status s = system::ensureWholeRenders(dir, seqs, groundTruthDir(), rate, render_settings); !s)
     return std::fprintf(stderr, "hermes_bench_system: %s\n", s.error().c_str()), 1;
   Robots robots;
@@ -507,7 +509,8 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
         const std::string td = cellTrackingDir(tracking_dir, v);
         cells.push_back({name, v, bw, td, ""});
         if (!td.empty() && dirs.insert(td).second)  // one recorder per robot and tracking folder
-          for (const auto& r : robots) recorders.push_back({"record_" + r.first, v, "0", td, r.first});
+          for (const auto& r : robots)
+            recorders.push_back({"record_" + r.first + (td == tracking_dir ? "" : "_" + v), v, "0", td, r.first});
       }
     // Longest first, so that the last runs to finish are short ones: raw streaming's
     // server is the slowest (25 min unlimited on whole MH against 2-10 for the others).
@@ -634,7 +637,6 @@ int main(int argc, char** argv) {
       if (!full.look.empty() && full.look != flag)
         return std::fprintf(stderr, "hermes_bench_system: --realistic and --plain exclude each other\n"), 2;
       full.look = flag;
-      full.realistic = flag == "--realistic";
     } else if (opt.is("--jobs")) {
       full.jobs = static_cast<int>(opt.whole(1, 16));
     } else if (opt.is("--cell")) {
