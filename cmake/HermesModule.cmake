@@ -29,7 +29,8 @@ function(hermes_module)
     # Benchmarks find shipped files and the shared data beside the checkout.
     target_compile_definitions(hermes_${stem} PRIVATE
       HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
-      HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data")
+      HERMES_DATA_DIR="${CMAKE_SOURCE_DIR}/data"
+      HERMES_TRAJECTORY_DIR="${CMAKE_SOURCE_DIR}/config/trajectories")
     set_target_properties(hermes_${stem} PROPERTIES
       RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/bin)
   endforeach()
@@ -42,7 +43,8 @@ function(hermes_module)
       target_link_libraries(${M_NAME}_testsupport PUBLIC ${M_NAME} GTest::gtest)
       target_compile_definitions(${M_NAME}_testsupport PRIVATE
         HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
-        HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data")
+        HERMES_DATA_DIR="${CMAKE_SOURCE_DIR}/data"
+      HERMES_TRAJECTORY_DIR="${CMAKE_SOURCE_DIR}/config/trajectories")
     endif()
     file(GLOB tests CONFIGURE_DEPENDS ${M_DIR}/test/test_*.cc)
     foreach(t ${tests})
@@ -55,7 +57,8 @@ function(hermes_module)
       endif()
       target_compile_definitions(${exe} PRIVATE
         HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
-        HERMES_SHARED_DATA_DIR="${CMAKE_SOURCE_DIR}/../shared/data"
+        HERMES_DATA_DIR="${CMAKE_SOURCE_DIR}/data"
+      HERMES_TRAJECTORY_DIR="${CMAKE_SOURCE_DIR}/config/trajectories"
         HERMES_BIN_DIR="${CMAKE_BINARY_DIR}/bin")
       # A test that runs the module's tools (it names HERMES_BIN_DIR) needs them built.
       file(READ ${t} body)

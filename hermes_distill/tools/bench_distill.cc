@@ -52,16 +52,8 @@ json stats(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // Data: --data, else $HERMES_SHARED_DATA_DIR, else shared/data beside the
-  // repository that holds this executable (<repo>/<build>/bin/..), else /work/shared/data.
-  std::string json_out, data_dir;
-  if (const char* env = std::getenv("HERMES_SHARED_DATA_DIR")) data_dir = env;
-  if (data_dir.empty()) {
-    std::error_code ec;
-    const auto exe = std::filesystem::canonical("/proc/self/exe", ec);
-    const auto beside = exe.parent_path().parent_path().parent_path().parent_path() / "shared" / "data";
-    data_dir = !ec && std::filesystem::exists(beside / "euroc_gt") ? beside.string() : "/work/shared/data";
-  }
+  // Trajectories: --data DIR (EuRoC ground truths, TUM format), else the shipped ones.
+  std::string json_out, data_dir = HERMES_TRAJECTORY_DIR;
   int windows = 10;
   std::vector<std::string> overrides;
   std::uint64_t seed = 7;
@@ -122,7 +114,7 @@ int main(int argc, char** argv) {
   for (const std::string& seq_name : sequences) {
     SyntheticWindowParams wp;
     wp.seed = seed;
-    auto scene = makeSceneFromTum(data_dir + "/euroc_gt/" + seq_name + ".txt", wp);
+    auto scene = makeSceneFromTum(data_dir + "/" + seq_name + ".txt", wp);
     if (!scene) {
       std::fprintf(stderr, "hermes_bench_distill: %s\n", scene.error().c_str());
       return 1;

@@ -1,7 +1,7 @@
 // Shared by the hermes_system benchmarks (bench_system, bench_soak, bench_relay,
 // bench_mapuse): their command-line options, comma lists and where whole-sequence
 // renders take their trajectories.
-// Header-only: HERMES_SOURCE_DIR / HERMES_SHARED_DATA_DIR are the tools' own
+// Header-only: HERMES_SOURCE_DIR is one of the tools' own
 // compile definitions (cmake/HermesModule.cmake).
 #pragma once
 
@@ -99,13 +99,10 @@ class Options {
   std::string name_;
 };
 
-/// The shared data's EuRoC ground truth, or (a machine without it) the 20-Hz
-/// copies shipped in config/trajectories (the renders sample 20 Hz: the same poses).
+/// The EuRoC ground truths shipped in config/trajectories (20 Hz: the poses the
+/// renders sample).
 inline std::string groundTruthDir() {
-  namespace fs = std::filesystem;
-  const fs::path shared = fs::path(HERMES_SHARED_DATA_DIR) / "euroc_gt";
-  if (fs::is_directory(shared)) return shared.string();
-  return (fs::path(HERMES_SOURCE_DIR) / "config" / "trajectories").string();
+  return (std::filesystem::path(HERMES_SOURCE_DIR) / "config" / "trajectories").string();
 }
 
 }  // namespace hermes::system::bench

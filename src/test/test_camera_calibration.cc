@@ -528,7 +528,7 @@ TEST(CameraCalibration, ShippedFilesLoad) {
   auto eu = loadCameraCalibration("euroc", kCameras);
   ASSERT_TRUE(eu.ok()) << eu.error();
   StereoRig expect{render::eurocCam0(), render::eurocCam1()};
-  const std::string micro = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_V1_01_micro";
+  const std::string micro = std::string(HERMES_DATA_DIR) + "/euroc_V1_01_micro";
   if (fs::exists(micro)) {
     auto ref = loadCameraCalibration(micro, kCameras);
     ASSERT_TRUE(ref.ok()) << ref.error();

@@ -22,7 +22,7 @@ namespace {
 std::string simBinary() {
   return (fs::read_symlink("/proc/self/exe").parent_path().parent_path() / "bin" / "hermes_sim").string();
 }
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_01_easy.txt";
+const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/MH_01_easy.txt";
 
 int run(const std::string& args) {
   const int rc = std::system((simBinary() + " " + args + " 2>/dev/null").c_str());
@@ -196,7 +196,7 @@ TEST(RenderCli, RealisticPresetAndSettingsAreRecorded) {
 
 TEST(RenderCli, JobsDoNotChangeTheOutput) {
   // Two robots rendered one after the other and at once: the same bytes.
-  const std::string gt2 = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_02_easy.txt";
+  const std::string gt2 = std::string(HERMES_TRAJECTORY_DIR) + "/MH_02_easy.txt";
   const std::string base = ::testing::TempDir() + "/render_cli_jobs";
   const std::string args = "--trajectory " + kGt + " --trajectory " + gt2 +
                            " --start 20 --duration 0.5 --rate 4 --width 188 --height 120 --out ";

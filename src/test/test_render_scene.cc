@@ -16,7 +16,7 @@ using namespace hermes::render;
 namespace {
 const Trajectory& mh01() {
   static const Trajectory t = [] {
-    auto r = readTumTrajectory(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_01_easy.txt");
+    auto r = readTumTrajectory(std::string(HERMES_TRAJECTORY_DIR) + "/MH_01_easy.txt");
     return r.ok() ? *r : Trajectory{};
   }();
   return t;
@@ -48,7 +48,7 @@ int orbCorners(const cv::Mat& img) {
 }  // namespace
 
 TEST(RenderScene, EnclosesMh01WithClearanceAndNoHoles) {
-  ASSERT_GT(mh01().size(), 1000u) << "MH_01_easy.txt missing under " << HERMES_SHARED_DATA_DIR;
+  ASSERT_GT(mh01().size(), 1000u) << "MH_01_easy.txt missing under " << HERMES_TRAJECTORY_DIR;
   const Scene& s = mh01Scene();
   ASSERT_GT(s.objects.size(), 3u);
   double worst = 1e9;
@@ -65,7 +65,7 @@ TEST(RenderScene, EnclosesMh01WithClearanceAndNoHoles) {
   Raycaster rc(s, RayGrid::fromRadtan(cam));
   RenderOutput out;
   int frames = 0;
-  for (std::size_t i = 0; i < mh01().size(); i += 400, ++frames) {
+  for (std::size_t i = 0; i < mh01().size(); i += 40, ++frames) {  // every 2 s (20 Hz file)
     rc.render(mh01()[i].T_W_B * cam.T_B_C, &out, true, true);
     double mn, mx;
     cv::minMaxLoc(out.face, &mn, &mx);

@@ -14,7 +14,7 @@ using namespace hermes;
 
 namespace {
 
-const std::string kMicro = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_V1_01_micro";
+const std::string kMicro = std::string(HERMES_DATA_DIR) + "/euroc_V1_01_micro";
 
 StereoRig microRig() {
   auto l = readEurocCameraYaml(kMicro + "/mav0/cam0/sensor.yaml");
@@ -116,7 +116,7 @@ TEST(StereoRig, RectifiesRealImages) {
   ASSERT_TRUE(ds.ok()) << ds.error();
   auto rs = rectify(StereoRig{ds->cam0(), ds->cam1()});
   ASSERT_TRUE(rs.ok()) << rs.error();
-  auto f = ds->load(40);
+  auto f = ds->load(30);
   ASSERT_TRUE(f.ok()) << f.error();
   cv::Mat lr, rr;
   const auto t0 = std::chrono::steady_clock::now();

@@ -34,8 +34,8 @@ TEST(Trajectory, ErrorsNamePathAndLine) {
 }
 
 TEST(Trajectory, ReadsRealEurocGroundTruth) {
-  auto r = readTumTrajectory(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_01_easy.txt");
+  auto r = readTumTrajectory(std::string(HERMES_TRAJECTORY_DIR) + "/MH_01_easy.txt");
   ASSERT_TRUE(r.ok()) << r.error();
-  EXPECT_GT(r->size(), 30000u);  // 182 s at 200 Hz
+  EXPECT_GT(r->size(), 3600u);  // 182 s at 20 Hz
   EXPECT_NEAR(r->back().t - r->front().t, 182.0, 2.0);
 }

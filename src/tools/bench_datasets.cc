@@ -69,18 +69,8 @@ void rowStats(const cv::Mat& l, const cv::Mat& r, std::vector<double>* dy) {
     if (x.distance < 40) dy->push_back(std::abs(kl[x.queryIdx].pt.y - kr[x.trainIdx].pt.y));
 }
 
-// The micro EuRoC sequence, looked up above the executable (repo/../shared/data).
-std::string defaultDataset() {
-  std::error_code ec;
-  std::filesystem::path p = std::filesystem::read_symlink("/proc/self/exe", ec);
-  if (ec) return "";
-  for (; p.has_parent_path() && p != p.parent_path(); p = p.parent_path()) {
-    std::error_code ec2;
-    for (const char* rel : {"shared/data/euroc_V1_01_micro", "data/euroc_V1_01_micro"})
-      if (std::filesystem::is_directory(p / rel, ec2)) return (p / rel).string();
-  }
-  return "";
-}
+// The shipped micro EuRoC sequence (data/README.md).
+std::string defaultDataset() { return std::string(HERMES_DATA_DIR) + "/euroc_V1_01_micro"; }
 
 }  // namespace
 

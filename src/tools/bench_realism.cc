@@ -1,5 +1,5 @@
 // hermes_bench_realism: how close rendered frames come to real EuRoC frames.
-// Compares the real V1_01 stereo clip (shared/data/euroc_V1_01_micro) with
+// Compares the real V1_01 stereo clip (data/euroc_V1_01_micro) with
 // renders along the V1_01 ground truth, default look and the realism preset,
 // on the same statistics: temporal noise sigma (static pairs) and its fit
 // sigma^2(I) = read + gain * I, mean grey level, gradient-magnitude histogram
@@ -201,8 +201,8 @@ struct Row {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string json_out, real = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_V1_01_micro";
-  std::string traj_path = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt";
+  std::string json_out, real = std::string(HERMES_DATA_DIR) + "/euroc_V1_01_micro";
+  std::string traj_path = std::string(HERMES_TRAJECTORY_DIR) + "/V1_01_easy.txt";
   int frames = 40, fast_threshold = 20;
   std::vector<std::string> sets = {"render.realistic=true"};
   for (int i = 1; i < argc; ++i) {
@@ -349,7 +349,7 @@ int main(int argc, char** argv) {
   j["realistic_inside"] = inside_realistic;
   if (realistic->sensor.motion_blur) {
     for (const char* stem : {"V1_01_easy", "V1_03_difficult", "MH_01_easy", "MH_04_difficult", "MH_05_difficult"}) {
-      const std::string path = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/" + stem + ".txt";
+      const std::string path = std::string(HERMES_TRAJECTORY_DIR) + "/" + stem + ".txt";
       if (!fs::exists(path)) continue;
       auto b = blurAlong(path, realistic->sensor, 30);
       if (!b.ok()) {

@@ -37,7 +37,7 @@ double wallNow() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string json_out, traj_path = "/work/shared/data/euroc_gt/MH_01_easy.txt";
+  std::string json_out, traj_path = HERMES_TRAJECTORY_DIR "/MH_01_easy.txt";
   int frames = 60;
   std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {

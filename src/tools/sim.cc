@@ -31,7 +31,7 @@ const char* kUsage =
     "                  [--width W --height H] [--no-noise] [--png-compression 0-9] [--jobs N]\n"
     "                  [--poor-fraction F] [--realistic | --plain] [--config FILE] [--set key=value ...]\n"
     "Renders one dataset folder per trajectory (TUM file of the body/IMU pose, e.g.\n"
-    "shared/data/euroc_gt/MH_01_easy.txt) under DIR/<trajectory stem>, all inside ONE\n"
+    "config/trajectories/MH_01_easy.txt) under DIR/<trajectory stem>, all inside ONE\n"
     "procedural scene enclosing every trajectory; the scene is described in DIR/scene.json.\n"
     "  euroc (default): stereo, real EuRoC cam0/cam1 calibration and T_BS, 752x480, 20 Hz;\n"
     "                   mav0/cam{0,1}/data/<ns>.png, data.csv, sensor.yaml, body.yaml,\n"

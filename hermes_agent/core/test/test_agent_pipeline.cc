@@ -30,7 +30,7 @@ constexpr double kSe3AteBound = 0.006;
 const std::string& renderedClip() {
   static std::string dir;
   if (!dir.empty()) return dir;
-  const std::string gt_path = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt";
+  const std::string gt_path = std::string(HERMES_TRAJECTORY_DIR) + "/V1_01_easy.txt";
   auto gt = readTumTrajectory(gt_path);
   if (!gt.ok()) throw std::runtime_error(gt.error());
   const PinholeRadtan cam0 = render::eurocCam0(), cam1 = render::eurocCam1();
@@ -198,7 +198,7 @@ struct OneWindowSource {
 };
 
 Expected<distill::SyntheticScene> v101Scene() {
-  return distill::makeSceneFromTum(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt",
+  return distill::makeSceneFromTum(std::string(HERMES_TRAJECTORY_DIR) + "/V1_01_easy.txt",
                                    distill::SyntheticWindowParams{});
 }
 

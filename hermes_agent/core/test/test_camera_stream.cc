@@ -184,7 +184,7 @@ TEST(CameraStream, DatasetCalibrationDescribesTheLoadedFrames) {
   // The real EuRoC micro clip, rectified by the dataset (what the DatasetPlayer
   // publishes) and raw: CameraInput must hand the pipeline the same camera and
   // the same pixels as the dataset's own rectification.
-  const std::string micro = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_V1_01_micro";
+  const std::string micro = std::string(HERMES_DATA_DIR) + "/euroc_V1_01_micro";
   auto rect = Dataset::open(micro);
   ASSERT_TRUE(rect.ok()) << rect.error();
   const DatasetInfo& info = (*rect)->info();

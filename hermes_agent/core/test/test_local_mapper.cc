@@ -121,7 +121,7 @@ struct ClipResult {
 /// ATE (SE(3) alignment) of the body trajectory against ground truth.
 ClipResult trackRenderedClip(bool ba, double offset_s, double seconds, double hz) {
   ClipResult out;
-  auto gt = readTumTrajectory(std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/MH_01_easy.txt");
+  auto gt = readTumTrajectory(std::string(HERMES_TRAJECTORY_DIR) + "/MH_01_easy.txt");
   if (!gt.ok()) return out;
   std::vector<Vec3> pos;
   for (const auto& p : *gt) pos.push_back(p.T_W_B.translation());

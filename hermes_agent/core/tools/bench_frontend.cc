@@ -261,9 +261,8 @@ std::vector<std::string> listPngs(const fs::path& dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // Shared data: $HERMES_SHARED_DATA_DIR, else the workspace default.
-  const char* env = std::getenv("HERMES_SHARED_DATA_DIR");
-  std::string data = std::string(env ? env : "/work/shared/data") + "/euroc_V1_01_micro/mav0";
+  // Real data: the shipped EuRoC clip (data/README.md).
+  std::string data = std::string(HERMES_DATA_DIR) + "/euroc_V1_01_micro/mav0";
   std::string json_out;
   std::string cache = "/tmp/hermes_bench_frontend";
   bool render = true, ablation = false;

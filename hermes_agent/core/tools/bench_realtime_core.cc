@@ -53,7 +53,7 @@ struct Clip {
 Expected<Clip> loadClip(const std::string& dir, bool tum, double rate_hz, double start_s,
                         double seconds) {
   if (!fs::exists(dir + "/done")) {
-    const std::string gt_path = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt";
+    const std::string gt_path = std::string(HERMES_TRAJECTORY_DIR) + "/V1_01_easy.txt";
     auto gt = readTumTrajectory(gt_path);
     if (!gt.ok()) return Error{gt.error()};
     const PinholeRadtan cam0 = render::eurocCam0(), cam1 = render::eurocCam1();

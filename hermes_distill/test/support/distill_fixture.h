@@ -18,12 +18,12 @@ namespace testing {
 const SyntheticScene& sceneFromFile(const std::string& path);
 SyntheticWindow windowFromFile(const std::string& path, double t_start, std::uint64_t seq);
 
-#ifdef HERMES_SHARED_DATA_DIR  // defined for test executables, not the support library
+#ifdef HERMES_TRAJECTORY_DIR  // defined for test executables, not the support library
 inline std::string groundTruthPath(const std::string& sequence) {
-  return std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/" + sequence + ".txt";
+  return std::string(HERMES_TRAJECTORY_DIR) + "/" + sequence + ".txt";
 }
 
-/// Scene / 5-s window of a EuRoC sequence of shared/data/euroc_gt.
+/// Scene / 5-s window of a EuRoC sequence of config/trajectories.
 inline const SyntheticScene& scene(const std::string& sequence) {
   return sceneFromFile(groundTruthPath(sequence));
 }

@@ -22,7 +22,7 @@ namespace server {
 namespace {
 
 namespace fs = std::filesystem;
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 
 const fixture::Fixture& hall() {
   static const fixture::Fixture fx = [] {

@@ -22,7 +22,7 @@ namespace server {
 namespace {
 
 using Frame = std::vector<std::uint8_t>;
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 constexpr int kFloodPerRound = 12;
 constexpr int kFloodFromRound = 2;
 

@@ -17,7 +17,7 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 
 struct Outcome {
   double ate_m = 0;

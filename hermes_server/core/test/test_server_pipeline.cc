@@ -16,7 +16,7 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 
 fixture::Fixture makeHall() {
   std::vector<fixture::AgentSpec> specs = {

@@ -17,7 +17,7 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 
 /// Two robots in one hall, a few submaps each.
 const fixture::Fixture& hall() {

@@ -13,7 +13,7 @@ namespace hermes {
 namespace server {
 namespace {
 
-const std::string kGt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 
 /// A fresh server that has merged `subs` of one agent (null on failure).
 std::unique_ptr<Server> serverWith(const std::vector<Submap>& subs) {

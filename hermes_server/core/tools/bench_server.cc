@@ -7,7 +7,7 @@
 // spinner, as before issue 17) and for ServerWorker (merging on its thread).
 //
 // Usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints 200] [--acks MS]
-//                            [--source REPO] [--data SHARED_DATA_DIR] [--set server.KEY=VALUE]
+//                            [--source REPO] [--data TRAJECTORY_DIR] [--set server.KEY=VALUE]
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
@@ -38,7 +38,7 @@ std::string g_source_dir, g_data_dir;
 ServerParams g_params;
 
 /// --source / --data, else the environment, else relative to this executable
-/// (<repo>/<build>/bin/hermes_bench_server), else /work/shared/data.
+/// (<repo>/<build>/bin/hermes_bench_server); trajectories from <source>/config/trajectories.
 void locateDirs(const char* argv0) {
   std::error_code ec;
   const auto exe = std::filesystem::canonical(std::filesystem::path(argv0), ec);
@@ -48,15 +48,12 @@ void locateDirs(const char* argv0) {
     else g_source_dir = repo.string();
   }
   if (g_data_dir.empty()) {
-    if (const char* env = std::getenv("HERMES_SHARED_DATA_DIR")) g_data_dir = env;
-    else if (std::filesystem::exists(repo.parent_path() / "shared/data/euroc_gt"))
-      g_data_dir = (repo.parent_path() / "shared/data").string();
-    else g_data_dir = "/work/shared/data";
+    g_data_dir = (std::filesystem::path(g_source_dir) / "config" / "trajectories").string();
   }
 }
 
 std::vector<fixture::AgentSpec> specsFor(int n) {
-  const std::string gt = g_data_dir + "/euroc_gt/";
+  const std::string gt = g_data_dir + "/";
   const char* files[3] = {"MH_01_easy.txt", "MH_02_easy.txt", "MH_03_medium.txt"};
   const double ends[3] = {20.0, 21.0, 17.0};
   std::vector<fixture::AgentSpec> specs;

@@ -15,7 +15,7 @@
 namespace hermes::test {
 
 Expected<RenderedClip> renderV101Clip(const std::string& name, double start_s, double duration_s) {
-  const std::string gt_path = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/V1_01_easy.txt";
+  const std::string gt_path = std::string(HERMES_TRAJECTORY_DIR) + "/V1_01_easy.txt";
   auto gt = readTumTrajectory(gt_path);
   if (!gt.ok()) return Error{gt.error()};
   const PinholeRadtan cam0 = render::eurocCam0(), cam1 = render::eurocCam1();

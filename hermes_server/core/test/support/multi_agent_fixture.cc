@@ -201,7 +201,7 @@ std::vector<const std::vector<std::uint8_t>*> roundRobin(const Fixture& fx) {
 }
 
 Expected<Fixture> hallPair(double seconds, int keypoints) {
-  const std::string gt = std::string(HERMES_SHARED_DATA_DIR) + "/euroc_gt/";
+  const std::string gt = std::string(HERMES_TRAJECTORY_DIR) + "/";
   Options options;
   options.keypoints = keypoints;
   return makeFixture({{gt + "MH_01_easy.txt", 0.0, seconds, -1}, {gt + "MH_02_easy.txt", 0.0, seconds, -1}},

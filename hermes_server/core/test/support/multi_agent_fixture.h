@@ -53,7 +53,7 @@ struct Fixture {
 Expected<Fixture> makeFixture(const std::vector<AgentSpec>& specs, const Options& options);
 
 /// Two robots in one hall: MH_01 and MH_02 (ground truth in
-/// ../shared/data/euroc_gt) over their first `seconds`, `keypoints` per keyframe.
+/// config/trajectories) over their first `seconds`, `keypoints` per keyframe.
 Expected<Fixture> hallPair(double seconds, int keypoints);
 
 /// The agents' frames round-robin (first of each, second of each, ...), as sent.
