@@ -80,16 +80,16 @@ const char* kUsage =
     "                   other; with 20, MH_04's 98 s hold 20 robots)\n"
     "  --swarm-bandwidth M  shared link of the swarm sweep [Mbit/s] (default 50)\n"
     "  --swarm-data DIR     whole-sequence renders (default data_cache/mh_full; rendered\n"
-    "                   from ../shared/data/euroc_gt, else config/trajectories, when missing)\n"
+    "                   from config/trajectories when missing)\n"
     "  --swarm-sequences L  (default MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,\n"
     "                   MH_05_difficult)\n"
     "  --full SET       instead: the whole-sequence table. SET mh: five robots over whole\n"
     "                   MH_01-05 in one hall (data_cache/mh_full_realistic); v1: three over\n"
-    "                   whole V1_01-03 (data_cache/v1_full_realistic); rendered from ../shared/data/euroc_gt\n"
-    "                   (else config/trajectories) when missing. Bandwidths default to 0,10,2,0.5, variants to\n"
+    "                   whole V1_01-03 (data_cache/v1_full_realistic); rendered from config/trajectories\n"
+    "                   when missing. Bandwidths default to 0,10,2,0.5, variants to\n"
     "                   hermes,raw,fixed_k100 (ablations: csa_off, covisibility, md, md_a, md_b\n"
     "                   run at every bandwidth given). Each run is kept in --out\n"
-    "                   (default results/bench_full_SET_realistic/<variant>_<Mbit/s>/, with\n"
+    "                   (default ./results/bench_full_SET_realistic/<variant>_<Mbit/s>/, with\n"
     "                   --plain results/bench_full_SET/...: metrics,\n"
     "                   trajectories, CSVs, bench_row.json); a run with a row there is\n"
     "                   not run again, so an interrupted table resumes. Progress on\n"
@@ -441,7 +441,7 @@ int runFull(FullOptions o, std::vector<std::string> variants, std::vector<std::s
   if (!variants_given) variants = split("hermes,raw,fixed_k100");
   if (!bandwidths_given) bandwidths = split("0,10,2,0.5");
   if (out.empty())
-    out = std::string(HERMES_SOURCE_DIR) + "/results/bench_full_" + set + (o.realistic() ? "_realistic" : "");
+    out = "results/bench_full_" + set + (o.realistic() ? "_realistic" : "");
   // The tracking is recorded by the first run and replayed by the others
   // (tracking_record.h): the agents' tracking is most of a run's time.
   if (o.live_tracking) tracking_dir.clear();
