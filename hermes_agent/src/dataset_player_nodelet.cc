@@ -50,7 +50,7 @@ class DatasetPlayerNodelet : public nodelet::Nodelet {
       return;
     }
     dataset_ = std::move(*ds);
-    stereo_ = dataset_->info().kind == hermes::DatasetKind::kEuroc;
+    stereo_ = hermes::isStereo(dataset_->info().kind);
     if (stereo_) {
       left_ = nh.advertise<sensor_msgs::Image>("left/image_rect", 5);
       second_ = nh.advertise<sensor_msgs::Image>("right/image_rect", 5);

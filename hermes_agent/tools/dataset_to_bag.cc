@@ -99,8 +99,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   const hermes::DatasetInfo& info = (*ds)->info();
-  const bool stereo = info.kind == hermes::DatasetKind::kEuroc;
-  if (layout == "euroc" && !stereo)
+  const bool stereo = hermes::isStereo(info.kind);
+  if (layout == "euroc" && info.kind != hermes::DatasetKind::kEuroc)
     return usageError("--layout euroc needs an EuRoC (stereo) folder; " + dir + " is " +
                       hermes::toString(info.kind));
   if (layout == "tum" && stereo)

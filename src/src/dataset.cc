@@ -36,13 +36,20 @@ Status DatasetParams::validate() const {
   return Status::Ok();
 }
 
-const char* toString(DatasetKind k) { return k == DatasetKind::kEuroc ? "euroc" : "tum"; }
+const char* toString(DatasetKind k) {
+  switch (k) {
+    case DatasetKind::kEuroc: return "euroc";
+    case DatasetKind::kTum: return "tum";
+    case DatasetKind::kKitti: return "kitti";
+  }
+  return "?";
+}
 
 std::string DatasetInfo::summary() const {
   char buf[256];
   std::snprintf(buf, sizeof(buf),
                 "%s dataset '%s': %zu frames, %.2f s, %dx%d fx %.2f%s, ground truth: %zu poses",
-                toString(kind), root.c_str(), frame_count, t_end - t_start, K.width, K.height,
+                layout.c_str(), root.c_str(), frame_count, t_end - t_start, K.width, K.height,
                 K.fx,
                 baseline > 0 ? (", baseline " + std::to_string(baseline) + " m").c_str() : "",
                 groundtruth.size());
@@ -56,8 +63,15 @@ Expected<DatasetKind> detectDatasetKind(const std::string& dir) {
   if (fs::exists(d / "mav0" / "cam0" / "data.csv", ec) || fs::exists(d / "cam0" / "data.csv", ec))
     return DatasetKind::kEuroc;
   if (fs::exists(d / "rgb.txt", ec) && fs::exists(d / "depth.txt", ec)) return DatasetKind::kTum;
-  return Error{"'" + dir + "' is neither a EuRoC folder (mav0/cam0/data.csv) nor a TUM folder "
-               "(rgb.txt + depth.txt)"};
+  if (fs::exists(d / "associations.txt", ec)) return DatasetKind::kTum;  // ICL-NUIM
+  if (looksLikeKittiSequence(dir)) return DatasetKind::kKitti;
+  std::string hint;
+  if (fs::is_directory(d / "sequences", ec))
+    hint = " (a KITTI odometry root: give one sequence, e.g. '" + (d / "sequences" / "00").string() + "')";
+  return Error{"'" + dir + "' is not a dataset folder Hermes reads" + hint +
+               "; looked for: EuRoC (mav0/cam0/data.csv or cam0/data.csv), TUM RGB-D (rgb.txt + "
+               "depth.txt), ICL-NUIM (associations.txt), KITTI odometry (image_0/, image_1/, "
+               "calib.txt)"};
 }
 
 Expected<std::unique_ptr<Dataset>> Dataset::open(const std::string& dir,
@@ -69,7 +83,28 @@ Expected<std::unique_ptr<Dataset>> Dataset::open(const std::string& dir,
   DatasetInfo& info = ds->info_;
   info.kind = *kind;
   info.root = dir;
-  if (*kind == DatasetKind::kEuroc) {
+  if (*kind == DatasetKind::kKitti) {
+    auto k = KittiDataset::open(dir);
+    if (!k) return Error{k.error()};
+    info.layout = "kitti";
+    info.frame_count = k->size();
+    const KittiCalibration& c = k->calibration();
+    PinholeRadtan left;
+    left.K = c.K;
+    left.dist.fill(0.0);
+    left.rate_hz = 10.0;
+    PinholeRadtan right = left;
+    right.T_B_C = SE3(Mat3::Identity(), Vec3(c.baseline, 0, 0));
+    info.stereo = StereoRig{left, right};
+    info.K = c.K;
+    info.baseline = c.baseline;
+    info.groundtruth = k->groundTruth();
+    info.t_start = k->pairs().front().t;
+    info.t_end = k->pairs().back().t;
+    info.warnings = k->warnings();
+    ds->data_ = std::move(*k);
+  } else if (*kind == DatasetKind::kEuroc) {
+    info.layout = "euroc";
     auto e = EurocDataset::open(dir);
     if (!e) return Error{e.error()};
     info.frame_count = e->size();
@@ -105,6 +140,7 @@ Expected<std::unique_ptr<Dataset>> Dataset::open(const std::string& dir,
     to.depth_scale = params.tum_depth_scale;
     auto t = TumDataset::open(dir, to);
     if (!t) return Error{t.error()};
+    info.layout = t->iclNuimLayout() ? "icl_nuim" : "tum";
     info.frame_count = t->size();
     info.rgbd = t->camera();
     info.K = t->camera().K;
@@ -128,10 +164,12 @@ Expected<std::unique_ptr<Dataset>> Dataset::open(const std::string& dir,
 double Dataset::frameTime(std::size_t i) const {
   HERMES_CHECK(i < size(), "frameTime index out of range");
   if (const auto* e = euroc()) return nsToSeconds(e->pairs()[i].stamp_ns);
+  if (const auto* k = kitti()) return k->pairs()[i].t;
   return tum()->pairs()[i].t_rgb;
 }
 
 Expected<StereoFrame> Dataset::loadStereo(std::size_t i) const {
+  if (const auto* k = kitti()) return k->load(i);
   const auto* e = euroc();
   if (!e) return Error{"'" + info_.root + "' is a TUM RGB-D dataset, not stereo"};
   auto f = e->load(i);
@@ -146,7 +184,7 @@ Expected<StereoFrame> Dataset::loadStereo(std::size_t i) const {
 
 Expected<RgbdFrame> Dataset::loadRgbd(std::size_t i) const {
   const auto* t = tum();
-  if (!t) return Error{"'" + info_.root + "' is a EuRoC stereo dataset, not RGB-D"};
+  if (!t) return Error{"'" + info_.root + "' is a stereo dataset, not RGB-D"};
   return t->load(i);
 }
 

@@ -1,6 +1,8 @@
 #include "hermes/core/eval_io.h"
 
+#include "hermes/core/dataset.h"
 #include "hermes/core/euroc_dataset.h"
+#include "hermes/core/tum_dataset.h"
 
 #include <sys/stat.h>
 
@@ -57,6 +59,12 @@ Expected<TrajectoryFormat> detectTrajectoryFormat(const std::string& file) {
       if (line.find("p_RS_R_x") != std::string::npos) return TrajectoryFormat::kEurocCsv;
       continue;
     }
+    std::istringstream fields(line);
+    int count = 0;
+    for (std::string f; fields >> f;) ++count;
+    if (count == 12)
+      return Error{"'" + file + "' looks like a KITTI poses file (12 numbers a row, no stamps): "
+                   "give the sequence folder (sequences/NN) instead"};
     std::string token = line.substr(first, line.find_first_of(" \t,", first) - first);
     const bool integer = !token.empty() && std::all_of(token.begin(), token.end(), ::isdigit);
     if (integer && token.size() >= 13) return TrajectoryFormat::kEurocCsv;  // >= 1e12 ns
@@ -97,8 +105,16 @@ Expected<SE3> readEurocSensorExtrinsic(const std::string& path) {
 }
 
 Expected<Trajectory> readTrajectoryForEval(const std::string& path) {
+  if (isDirectory(path) && !resolveTrajectoryPath(path).ok()) {
+    // Any other dataset folder: the ground truth its reader finds, in its conventions.
+    auto ds = probeDataset(path);
+    if (!ds) return Error{"folder '" + path + "': " + ds.error()};
+    if (ds->groundtruth.empty()) return Error{"dataset '" + path + "' has no ground truth"};
+    return ds->groundtruth;
+  }
   Expected<std::string> file = resolveTrajectoryPath(path);
   if (!file) return Error{file.error()};
+  if (isIclNuimGroundTruthName(*file)) return readIclNuimGroundTruth(*file);
   Expected<TrajectoryFormat> fmt = detectTrajectoryFormat(*file);
   if (!fmt) return Error{fmt.error()};
   return *fmt == TrajectoryFormat::kEurocCsv ? readEurocGroundTruthCsv(*file)

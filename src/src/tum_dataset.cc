@@ -35,7 +35,86 @@ Status requireDouble(const YAML::Node& root, const std::string& key, const std::
   return Status::Ok();
 }
 
+/// True when every stamp is a whole number and they rise by whole steps: frame indices.
+bool frameIndexStamps(const std::vector<double>& stamps) {
+  if (stamps.size() < 2) return !stamps.empty() && stamps[0] == std::floor(stamps[0]);
+  for (double t : stamps)
+    if (t != std::floor(t)) return false;
+  return true;
+}
+
+struct AssociationRow {
+  double t_rgb = 0, t_depth = 0;
+  std::string rgb, depth;
+};
+
+/// associations.txt: `t depth t rgb` (ICL-NUIM) or `t rgb t depth` (TUM's associate.py),
+/// told apart by which file name holds "depth".
+Expected<std::vector<AssociationRow>> readAssociations(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return Error{"association list '" + path + "' cannot be opened"};
+  std::vector<AssociationRow> rows;
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const std::string t = trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    std::istringstream ss(t);
+    std::string s1, f1, s2, f2, extra;
+    ss >> s1 >> f1 >> s2 >> f2;
+    const std::string where = path + ":" + std::to_string(lineno);
+    double t1 = 0, t2 = 0;
+    if (f2.empty() || (ss >> extra) || !parseDouble(s1, &t1) || !parseDouble(s2, &t2))
+      return Error{where + ": expected 'stamp file stamp file'"};
+    const bool depth_first = f1.find("depth") != std::string::npos;
+    if (depth_first == (f2.find("depth") != std::string::npos))
+      return Error{where + ": exactly one of the two files must be a depth image (name holds 'depth')"};
+    AssociationRow r;
+    if (depth_first) r = {t2, t1, f2, f1};
+    else r = {t1, t2, f1, f2};
+    if (!rows.empty() && r.t_rgb <= rows.back().t_rgb) return Error{where + ": stamps must increase"};
+    rows.push_back(std::move(r));
+  }
+  if (rows.empty()) return Error{"association list '" + path + "' holds no rows"};
+  return rows;
+}
+
+/// The folder's ICL-NUIM ground truth: `*.gt.freiburg` in it, else in its parent.
+std::string findFreiburgGroundTruth(const fs::path& root) {
+  std::error_code ec;
+  for (const fs::path& d : {root, fs::absolute(root, ec).parent_path()}) {
+    std::vector<std::string> found;
+    for (const auto& e : fs::directory_iterator(d, ec))
+      if (e.is_regular_file(ec) && isIclNuimGroundTruthName(e.path().string()))
+        found.push_back(e.path().string());
+    std::sort(found.begin(), found.end());
+    if (!found.empty()) return found.front();
+  }
+  return "";
+}
+
 }  // namespace
+
+bool isIclNuimGroundTruthName(const std::string& path) {
+  const std::string tail = ".gt.freiburg";
+  return path.size() > tail.size() && path.compare(path.size() - tail.size(), tail.size(), tail) == 0;
+}
+
+Expected<Trajectory> readIclNuimGroundTruth(const std::string& path, double rate_hz) {
+  if (!(rate_hz > 0)) return Error{"ICL-NUIM ground truth '" + path + "': rate must be positive"};
+  auto traj = readTumTrajectory(path);
+  if (!traj) return Error{traj.error()};
+  std::vector<double> stamps;
+  for (const auto& p : *traj) stamps.push_back(p.t);
+  const bool indices = frameIndexStamps(stamps);
+  const Mat3 M = Vec3(1, -1, 1).asDiagonal();
+  for (auto& p : *traj) {
+    if (indices) p.t /= rate_hz;
+    p.T_W_B = SE3(Mat3(M * p.T_W_B.rotation() * M), Vec3(M * p.T_W_B.translation()));
+  }
+  return traj;
+}
 
 RgbdCamera iclNuimDefaultCamera() {
   RgbdCamera c;
@@ -204,6 +283,8 @@ Expected<TumDataset> TumDataset::open(const std::string& dir, const TumOptions& 
   }
   if (opt.depth_scale > 0) ds.camera_.depth_scale = opt.depth_scale;
 
+  const bool tum_lists = fs::exists(root / "rgb.txt", ec) && fs::exists(root / "depth.txt", ec);
+  if (!tum_lists && fs::exists(root / "associations.txt", ec)) return openIclNuim(std::move(ds));
   auto rgb = readTumImageList((root / "rgb.txt").string());
   if (!rgb) return Error{rgb.error()};
   auto depth = readTumImageList((root / "depth.txt").string());
@@ -239,6 +320,43 @@ Expected<TumDataset> TumDataset::open(const std::string& dir, const TumOptions& 
     auto traj = readTumTrajectory(gt.string());
     if (!traj) return Error{traj.error()};
     ds.groundtruth_ = std::move(*traj);
+  }
+  return ds;
+}
+
+Expected<TumDataset> TumDataset::openIclNuim(TumDataset ds) {
+  std::error_code ec;
+  const fs::path root(ds.root_);
+  ds.icl_layout_ = true;
+  const std::string list = (root / "associations.txt").string();
+  auto rows = readAssociations(list);
+  if (!rows) return Error{rows.error()};
+  std::vector<double> stamps;
+  for (const auto& r : *rows) stamps.push_back(r.t_rgb);
+  const bool indices = frameIndexStamps(stamps);
+  const double rate = ds.camera_.rate_hz > 0 ? ds.camera_.rate_hz : 30.0;
+  const double scale = indices ? 1.0 / rate : 1.0;
+  if (indices)
+    ds.warnings_.push_back("ICL-NUIM layout: stamps in '" + list + "' are frame indices, read as index / " +
+                           std::to_string(static_cast<int>(rate)) + " Hz");
+  for (const auto& r : *rows) {
+    const bool has_rgb = fs::is_regular_file(root / r.rgb, ec);
+    const bool has_depth = fs::is_regular_file(root / r.depth, ec);
+    if (!has_rgb) ++ds.skipped_.rgb_missing_image;
+    if (!has_depth) ++ds.skipped_.depth_missing_image;
+    if (has_rgb && has_depth)
+      ds.pairs_.push_back({r.t_rgb * scale, r.t_depth * scale, (root / r.rgb).string(),
+                           (root / r.depth).string()});
+  }
+  if (ds.pairs_.empty()) return Error{"ICL-NUIM folder '" + ds.root_ + "': no row of '" + list +
+                                      "' has both its images"};
+  const std::string gt = findFreiburgGroundTruth(root);
+  if (!gt.empty()) {
+    auto traj = readIclNuimGroundTruth(gt, rate);
+    if (!traj) return Error{traj.error()};
+    ds.groundtruth_ = std::move(*traj);
+    ds.warnings_.push_back("ICL-NUIM ground truth '" + gt +
+                           "': y axis mirrored from the published fy < 0 convention to the images' fy > 0");
   }
   return ds;
 }

@@ -4,7 +4,7 @@ namespace hermes {
 
 Expected<CameraFrame> loadCameraFrame(const Dataset& dataset, std::size_t i) {
   CameraFrame frame;
-  if (dataset.info().kind == DatasetKind::kEuroc) {
+  if (isStereo(dataset.info().kind)) {
     auto f = dataset.loadStereo(i);
     if (!f.ok()) return Error{f.error()};
     frame.stamp = f->t;
@@ -31,7 +31,7 @@ CameraCalibration datasetCalibration(const Dataset& dataset) {
     c.kind = CameraCalibration::Kind::kRgbd;
     c.rgbd = *info.rgbd;
     c.rgbd.T_B_C = info.T_B_C;
-  } else if (dataset.rectification() == nullptr) {
+  } else if (!dataset.stereoRectified()) {
     c.stereo = *info.stereo;
   } else {
     PinholeRadtan left;

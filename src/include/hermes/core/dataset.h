@@ -1,5 +1,5 @@
-// The runner's one door to dataset folders: detects the layout (EuRoC ASL or
-// TUM RGB-D / ICL-NUIM), describes it (DatasetInfo) and loads frame i.
+// The runner's one door to dataset folders: detects the layout (EuRoC ASL, TUM RGB-D,
+// ICL-NUIM as published, KITTI odometry), describes it (DatasetInfo) and loads frame i.
 #pragma once
 
 #include <memory>
@@ -12,6 +12,7 @@
 #include "hermes/core/config.h"
 #include "hermes/core/dataset_frames.h"
 #include "hermes/core/euroc_dataset.h"
+#include "hermes/core/kitti_dataset.h"
 #include "hermes/core/status.h"
 #include "hermes/core/stereo_rig.h"
 #include "hermes/core/trajectory.h"
@@ -31,21 +32,26 @@ struct DatasetParams {
   Status validate() const;
 };
 
-enum class DatasetKind { kEuroc, kTum };
+/// kEuroc: raw stereo + calibration; kKitti: rectified stereo; kTum: RGB-D (TUM RGB-D
+/// and ICL-NUIM).
+enum class DatasetKind { kEuroc, kTum, kKitti };
 const char* toString(DatasetKind k);
+inline bool isStereo(DatasetKind k) { return k != DatasetKind::kTum; }
 
 struct DatasetInfo {
   DatasetKind kind = DatasetKind::kEuroc;
   std::string root;             ///< the folder as given
   std::size_t frame_count = 0;  ///< stereo pairs / associated rgb-depth pairs
-  std::optional<StereoRig> stereo;        ///< EuRoC: raw cameras
+  std::string layout;           ///< euroc | tum | icl_nuim | kitti
+  std::optional<StereoRig> stereo;        ///< EuRoC: raw cameras; KITTI: the rectified pair
   std::optional<RgbdCamera> rgbd;         ///< TUM: depth camera
   /// Intrinsics of the images handed out (rectified left for EuRoC when
   /// rectification is on, the raw left otherwise; the RGB-D camera for TUM).
   PinholeIntrinsics K;
-  double baseline = 0;  ///< [m] rectified stereo baseline (EuRoC), 0 for TUM
+  double baseline = 0;  ///< [m] rectified stereo baseline (EuRoC, KITTI), 0 for TUM
   /// Body <- tracked camera: rectified left camera (EuRoC, rectification on),
-  /// raw left (EuRoC, off), camera.yaml's T_B_C (TUM). Estimated camera
+  /// raw left (EuRoC, off), camera.yaml's T_B_C (TUM), the identity (KITTI: the
+  /// ground truth is the left camera's). Estimated camera
   /// trajectories map to body poses through its inverse.
   SE3 T_B_C;
   Trajectory groundtruth;  ///< body pose in the world; empty when absent
@@ -66,7 +72,7 @@ class Dataset {
   /// Stamp of frame i [s] without loading images.
   double frameTime(std::size_t i) const;
 
-  /// EuRoC only: pair i, rectified when params.rectify.
+  /// EuRoC (rectified when params.rectify) and KITTI (rectified as published): pair i.
   Expected<StereoFrame> loadStereo(std::size_t i) const;
   /// TUM only: frame i.
   Expected<RgbdFrame> loadRgbd(std::size_t i) const;
@@ -77,11 +83,14 @@ class Dataset {
   }
   const EurocDataset* euroc() const { return std::get_if<EurocDataset>(&data_); }
   const TumDataset* tum() const { return std::get_if<TumDataset>(&data_); }
+  const KittiDataset* kitti() const { return std::get_if<KittiDataset>(&data_); }
+  /// True when loadStereo() hands out rectified images (KITTI, or EuRoC rectified here).
+  bool stereoRectified() const { return rectified_.has_value() || kitti() != nullptr; }
 
  private:
   Dataset() = default;
   DatasetInfo info_;
-  std::variant<EurocDataset, TumDataset> data_;
+  std::variant<EurocDataset, TumDataset, KittiDataset> data_;
   std::optional<RectifiedStereo> rectified_;
 };
 
@@ -89,8 +98,10 @@ class Dataset {
 /// list and calibration errors surface here).
 Expected<DatasetInfo> probeDataset(const std::string& dir, const DatasetParams& params = {});
 
-/// Layout detection only: kEuroc when DIR/mav0/cam0 or DIR/cam0 holds a
-/// data.csv, kTum when DIR holds rgb.txt and depth.txt; error naming DIR otherwise.
+/// Layout detection only: kEuroc when DIR/mav0/cam0 or DIR/cam0 holds a data.csv,
+/// kTum when DIR holds rgb.txt and depth.txt (TUM) or associations.txt (ICL-NUIM),
+/// kKitti when DIR holds image_0/, image_1/ and calib.txt; otherwise an error naming
+/// DIR and every layout looked for.
 Expected<DatasetKind> detectDatasetKind(const std::string& dir);
 
 }  // namespace hermes

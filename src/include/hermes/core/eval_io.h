@@ -29,7 +29,10 @@ Expected<TrajectoryFormat> detectTrajectoryFormat(const std::string& file);
 /// OpenCV's `%YAML:1.0` line is accepted). Errors name the file and the problem.
 Expected<SE3> readEurocSensorExtrinsic(const std::string& path);
 
-/// resolve + detect + read.
+/// resolve + detect + read. An ICL-NUIM `*.gt.freiburg` file is read as
+/// readIclNuimGroundTruth() gives it (frame-index stamps at 30 Hz, y mirrored to the
+/// images' convention); any other dataset folder (TUM, ICL-NUIM, KITTI sequences/NN)
+/// yields the ground truth its dataset reader finds.
 Expected<Trajectory> readTrajectoryForEval(const std::string& path);
 
 }  // namespace eval

@@ -1,5 +1,10 @@
-// TUM RGB-D / ICL-NUIM folder layout: rgb.txt, depth.txt (`timestamp filename`,
-// '#' comments), optional groundtruth.txt (TUM trajectory), optional camera.yaml.
+// RGB-D folder layouts:
+//  * TUM RGB-D: rgb.txt, depth.txt (`timestamp filename`, '#' comments), optional
+//    groundtruth.txt (TUM trajectory), optional camera.yaml.
+//  * ICL-NUIM's "TUM RGB-D compatible" release: associations.txt with rows
+//    `K depth/K.png K rgb/K.png` (the stamps are frame indices at 30 Hz; TUM's own
+//    `t_rgb rgb t_depth depth` order is read too), ground truth `*.gt.freiburg` in the
+//    folder or the one above it, optional camera.yaml (default: ICL-NUIM's camera).
 //
 // camera.yaml (Hermes' small format, written by our renderer):
 //   camera_model: pinhole   # optional; only pinhole
@@ -41,6 +46,15 @@ Status writeTumCameraYaml(const std::string& path, const RgbdCamera& cam);
 /// depth scale 5000), used when a folder has no camera.yaml.
 RgbdCamera iclNuimDefaultCamera();
 
+/// ICL-NUIM ground truth (`*.gt.freiburg`) as published: TUM rows whose stamps are
+/// frame indices (all integers: converted to index / rate_hz seconds) in the fy < 0
+/// convention of ICL-NUIM's renderer. Returned in the convention of the images as
+/// stored (fy > 0): T <- M T M with M = diag(1, -1, 1), a mirror of the camera's and
+/// the world's y axis that keeps every distance (so the ATE against it is the true one).
+Expected<Trajectory> readIclNuimGroundTruth(const std::string& path, double rate_hz = 30.0);
+/// True when the file name ends in `.gt.freiburg` (ICL-NUIM's ground-truth name).
+bool isIclNuimGroundTruthName(const std::string& path);
+
 /// One line of rgb.txt / depth.txt.
 struct TumImageRow {
   double t = 0;          ///< [s]
@@ -74,6 +88,8 @@ class TumDataset {
   /// The camera, with the colour lens distortion (RgbdCamera::dist) that
   /// keypoints of load()ed images still carry.
   const RgbdCamera& camera() const { return camera_; }
+  /// True for ICL-NUIM's published layout (associations.txt, *.gt.freiburg).
+  bool iclNuimLayout() const { return icl_layout_; }
   /// True when camera.yaml was absent and ICL-NUIM defaults are used.
   bool defaultCamera() const { return default_camera_; }
   /// Human-readable notes (e.g. the default-intrinsics fallback).
@@ -82,17 +98,21 @@ class TumDataset {
   std::size_t size() const { return pairs_.size(); }
   const SkipCounts& skipped() const { return skipped_; }
   bool hasGroundTruth() const { return !groundtruth_.empty(); }
-  /// groundtruth.txt as read (pose of the body in the world; with the default
-  /// identity T_B_C this is the camera pose, as in TUM).
+  /// groundtruth.txt as read, or ICL-NUIM's *.gt.freiburg as readIclNuimGroundTruth()
+  /// gives it (pose of the body in the world; with the default identity T_B_C this is
+  /// the camera pose, as in TUM).
   const Trajectory& groundTruth() const { return groundtruth_; }
 
   /// Loads pair i: colour, grey and metric depth. Errors name the image path.
   Expected<RgbdFrame> load(std::size_t i) const;
 
  private:
+  /// The rest of open() for ICL-NUIM's layout (camera already read).
+  static Expected<TumDataset> openIclNuim(TumDataset ds);
   std::string root_;
   RgbdCamera camera_;
   bool default_camera_ = false;
+  bool icl_layout_ = false;
   std::vector<std::string> warnings_;
   std::vector<Pair> pairs_;
   SkipCounts skipped_;
