@@ -362,14 +362,18 @@ Status OfflineRun::feedAgent(std::size_t i, double t) {
     if (a.pipeline->replaying()) {  // the recorded tracking of this frame, no image
       stamp = a.dataset->frameTime(a.next);
       if (auto r = a.pipeline->replayFrame(stamp); !r.ok()) return Error{what + r.error()};
+    } else if (auto frame = loadCameraFrame(*a.dataset, a.next); !frame.ok()) {
+      // A frame that cannot be read costs that frame: counted, logged once per cause.
+      if (a.skips.add(frame.error()))
+        std::fprintf(stderr, "hermes: warning: %sskipped (%s); further frames of this cause are counted\n",
+                     what.c_str(), frame.error().c_str());
+      stamp = -1;
     } else {
-      auto frame = loadCameraFrame(*a.dataset, a.next);
-      if (!frame.ok()) return Error{what + frame.error()};
       stamp = frame->stamp;
       if (auto r = a.pipeline->feed(*frame); !r.ok()) return Error{what + r.error()};
     }
     const Trajectory& odo = a.pipeline->trajectory();
-    if (!odo.empty() && odo.back().t == stamp)
+    if (stamp >= 0 && !odo.empty() && odo.back().t == stamp)
       if (const auto T_W_B = a.pipeline->globalPose().inWorld(odo.back().T_W_B))
         a.global_track.push_back({stamp, *T_W_B});
     if (++a.next == sortieEnd(a)) {  // the end of the data or a landing
@@ -570,12 +574,21 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
       sampleHealth(t);
       next_health_ += c.health_period_s;
     }
+    if (stop_requested_.load() && !stopped_early_) {  // finish as at the end of the data
+      stopped_early_ = true;
+      for (OfflineAgent& a : agents_) {
+        if (a.next >= a.frames) continue;
+        a.frames = a.next;
+        if (a.frames > 0 && !a.landed) a.pipeline->flushWindow();
+      }
+    }
     const bool frames_left = std::any_of(agents_.begin(), agents_.end(),
                                          [](const OfflineAgent& a) { return a.next < a.frames; });
     const bool carried = std::any_of(agents_.begin(), agents_.end(), [](const OfflineAgent& a) {
       return a.pipeline->hasCarriedWindow();
     });
-    const bool done = !frames_left && ((backlog() == 0 && !carried) || t >= end_all);
+    const bool done =
+        stopped_early_ || (!frames_left && ((backlog() == 0 && !carried) || t >= end_all));
     if (progress && (t >= next_progress || done)) {
       ProgressInfo p;
       p.sim_time = t;

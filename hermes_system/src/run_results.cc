@@ -189,6 +189,10 @@ RunResults evaluateRun(const OfflineRun& run) {
   m.relocalised = sm.relocalised;
   m.robots_new = sm.robots_new;
   m.loops_bridged = sm.loops_bridged;
+  if (run.stoppedEarly()) {
+    m.incomplete = true;
+    m.stopped_because = "stopped before the end of the data (interrupted)";
+  }
   TimingStats timings = srv.timings();
   const eval::EvalParams& ep = run.params().run.eval;
   std::vector<eval::AgentTrajectories> merged;
@@ -196,6 +200,8 @@ RunResults evaluateRun(const OfflineRun& run) {
   for (const OfflineAgent& a : run.agents()) {
     timings.merge(a.pipeline->timings());
     AgentMetrics am = a.pipeline->metrics();
+    am.frames_skipped = a.skips.total();
+    am.frames_skipped_causes = a.skips.byCause();
     am.bytes = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
     if (run.network())  // what really went onto a link (a robot without a route sends nothing)
       am.bytes = std::llround(run.network()->ownBytes(static_cast<std::size_t>(&a - run.agents().data())));

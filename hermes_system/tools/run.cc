@@ -4,7 +4,9 @@
 // with --no-server a single agent only tracks. Writes the results folder
 // (run_results.h), evaluates against each dataset's ground truth, draws plots.
 #include <chrono>
+#include <atomic>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -24,6 +26,16 @@ using namespace hermes;
 namespace fs = std::filesystem;
 
 namespace {
+
+// Ctrl-C: the run stops at its next frame and writes what it has (a second one kills).
+volatile std::sig_atomic_t g_interrupted = 0;
+std::atomic<system::OfflineRun*> g_run{nullptr};
+void onInterrupt(int) {
+  g_interrupted = 1;
+  if (system::OfflineRun* r = g_run.load()) r->requestStop();
+  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGTERM, SIG_DFL);
+}
 
 const char* kUsage =
     "usage: hermes_run --dataset DIR [--dataset DIR2 ...] --out DIR [--config FILE]\n"
@@ -244,6 +256,8 @@ int main(int argc, char** argv) {
     std::cout << kUsage;
     return 0;
   }
+  std::signal(SIGINT, onInterrupt);
+  std::signal(SIGTERM, onInterrupt);
   // Paths first, so that a wrong path is reported as such.
   std::error_code ec;
   for (const std::string& d : args.datasets)
@@ -305,6 +319,8 @@ int main(int argc, char** argv) {
   auto run = system::OfflineRun::create(*params, std::move(sources), (out / "spool").string(),
                                         HERMES_SOURCE_DIR);
   if (!run.ok()) return badInput(run.error());
+  g_run.store(run->get());
+  if (g_interrupted) (*run)->requestStop();
   std::vector<server::LoopAttempt> attempts;
   (*run)->onServerCreated([&attempts](server::Server& srv) {
     srv.mapManager().setAttemptHook([&attempts](const server::LoopAttempt& a) { attempts.push_back(a); });
@@ -322,7 +338,18 @@ int main(int argc, char** argv) {
                  p.sim_time, p.sim_end, p.draining ? " (delivering backlog)" : "", p.frames_done,
                  p.frames_total, p.merged_submaps, p.agents_merged, wall());
   });
-  if (!s) return failure(s.error());
+  g_run.store(nullptr);
+  if (!s) {  // what was merged until the error is still written, marked incomplete
+    if ((*run)->hasServer()) {
+      system::RunResults partial = system::evaluateRun(**run);
+      partial.metrics.incomplete = true;
+      partial.metrics.stopped_because = s.error();
+      if (Status w = system::writeRunResults(**run, partial, out.string()); w.ok())
+        std::fprintf(stderr, "hermes_run: the results so far are in %s (marked incomplete)\n",
+                     out.string().c_str());
+    }
+    return failure(s.error());
+  }
   const double wall_s = wall();
   const system::RunResults results = system::evaluateRun(**run);
   if (Status w = system::writeRunResults(**run, results, out.string()); !w) return failure(w.error());
@@ -333,10 +360,10 @@ int main(int argc, char** argv) {
     std::cout << system::resultsJson(results).dump(2) << "\n";
   } else {
     std::printf("%s", system::formatReport(**run, results).c_str());
-    std::printf("simulated %.1f s in %.1f s wall; results in %s\n", (*run)->simTime(), wall_s,
-                out.string().c_str());
+    std::printf("simulated %.1f s in %.1f s wall; results in %s%s\n", (*run)->simTime(), wall_s,
+                out.string().c_str(), (*run)->stoppedEarly() ? " (incomplete: interrupted)" : "");
   }
-  return 0;
+  return (*run)->stoppedEarly() ? 130 : 0;
 }
 
 namespace {
@@ -357,13 +384,27 @@ int runNoServer(const Args& args, system::SystemParams& params, std::unique_ptr<
   const auto t_start = Clock::now();
   auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
   double last_report = 0;
+  FrameSkips skips;
+  std::string stopped;  // why the run ended before its last frame; empty: it did not
   for (std::size_t i = 0; i < n; ++i) {
+    if (g_interrupted) {
+      stopped = "interrupted at frame " + std::to_string(i);
+      break;
+    }
     const auto t0 = Clock::now();
     auto frame = loadCameraFrame(*dataset, i);
     io_timings.add("load", std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-    if (!frame.ok()) return failure("frame " + std::to_string(i) + ": " + frame.error());
+    if (!frame.ok()) {  // costs this frame, not the run
+      if (skips.add(frame.error()))
+        std::fprintf(stderr, "hermes_run: warning: frame %zu skipped (%s); further frames of this "
+                     "cause are counted\n", i, frame.error().c_str());
+      continue;
+    }
     auto result = (*pipeline)->feed(*frame);
-    if (!result.ok()) return failure("frame " + std::to_string(i) + ": " + result.error());
+    if (!result.ok()) {
+      stopped = "frame " + std::to_string(i) + ": " + result.error();
+      break;
+    }
     const double now = seconds();
     if (!args.quiet && (now - last_report >= 2.0 || i + 1 == n)) {
       last_report = now;
@@ -382,6 +423,12 @@ int runNoServer(const Args& args, system::SystemParams& params, std::unique_ptr<
   RunMetrics metrics;
   metrics.per_agent.push_back(agent.metrics());
   metrics.per_agent.back().submaps_applied = 0;
+  metrics.per_agent.back().frames_skipped = skips.total();
+  metrics.per_agent.back().frames_skipped_causes = skips.byCause();
+  if (!stopped.empty()) {
+    metrics.incomplete = true;
+    metrics.stopped_because = stopped;
+  }
   metrics.bytes_total = agent.bytesSent();
   TimingStats timings = agent.timings();
   timings.merge(io_timings);
@@ -420,8 +467,10 @@ int runNoServer(const Args& args, system::SystemParams& params, std::unique_ptr<
     for (const auto& [stage, t] : metrics.timings_ms)
       std::printf("  %-12s median %7.2f ms  p95 %7.2f ms  (%lld)\n", stage.c_str(), t.median,
                   t.p95, static_cast<long long>(t.count));
-    std::printf("results in %s\n", out.string().c_str());
+    if (skips.total() > 0) std::printf("  %s\n", skips.summary().c_str());
+    std::printf("results in %s%s\n", out.string().c_str(), stopped.empty() ? "" : " (incomplete)");
   }
+  if (!stopped.empty()) return g_interrupted ? 130 : failure(stopped);
   return 0;
 }
 

@@ -110,6 +110,8 @@ void to_json(json& j, const AgentMetrics& m) {
   if (m.sessions) j["sessions"] = *m.sessions;
   if (m.relocalised) j["relocalised"] = *m.relocalised;
   if (m.reported_new) j["reported_new"] = *m.reported_new;
+  if (m.frames_skipped) j["frames_skipped"] = *m.frames_skipped;
+  if (!m.frames_skipped_causes.empty()) j["frames_skipped_causes"] = m.frames_skipped_causes;
 }
 
 void to_json(json& j, const RunMetrics& m) {
@@ -147,6 +149,8 @@ void to_json(json& j, const RunMetrics& m) {
   if (m.relocalised) j["relocalised"] = *m.relocalised;
   if (m.robots_new) j["robots_new"] = *m.robots_new;
   if (m.loops_bridged) j["loops_bridged"] = *m.loops_bridged;
+  if (m.incomplete) j["incomplete"] = *m.incomplete;
+  if (m.stopped_because) j["stopped_because"] = *m.stopped_because;
 }
 
 // ---------------------------------------------------------------- reading
@@ -199,6 +203,26 @@ class ObjectReader {
     }
     throw FieldError("field '" + field(key) + "' must be an integer or null, got " +
                      (v->is_number() ? v->dump() : std::string(typeName(*v))));
+  }
+  std::optional<bool> boolean(const std::string& key, bool required) const {
+    const json* v = get(key, required);
+    if (!v || v->is_null()) return std::nullopt;
+    if (!v->is_boolean())
+      throw FieldError("field '" + field(key) + "' must be true or false, got " + typeName(*v));
+    return v->get<bool>();
+  }
+  /// An object of integer counts ({"cause": n}); empty when absent.
+  std::map<std::string, int64_t> counts(const std::string& key) const {
+    std::map<std::string, int64_t> out;
+    const json* v = get(key, false);
+    if (!v || v->is_null()) return out;
+    ObjectReader r(*v, field(key));
+    for (const auto& [name, n] : v->items()) {
+      auto c = r.integer(name, true);
+      if (!c) throw FieldError("field '" + r.field(name) + "' must be an integer, got null");
+      out[name] = *c;
+    }
+    return out;
   }
   std::optional<std::string> string(const std::string& key, bool required) const {
     const json* v = get(key, required);
@@ -275,6 +299,8 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.sessions = r.integer("sessions", false);
   a.relocalised = r.integer("relocalised", false);
   a.reported_new = r.integer("reported_new", false);
+  a.frames_skipped = r.integer("frames_skipped", false);
+  a.frames_skipped_causes = r.counts("frames_skipped_causes");
   return a;
 }
 
@@ -324,14 +350,9 @@ RunMetrics parseRun(const json& j) {
   m.max_dt_s = r.number("max_dt_s", false);
   m.rpe_delta = r.number("rpe_delta", false);
   m.rpe_delta_unit = r.string("rpe_delta_unit", false);
-  if (const json* refused = r.get("frames_refused", false); refused && !refused->is_null()) {
-    ObjectReader fr(*refused, "frames_refused");
-    for (const auto& [reason, v] : refused->items()) {
-      auto n = fr.integer(reason, true);
-      if (!n) throw FieldError("field 'frames_refused." + reason + "' must be an integer, got null");
-      m.frames_refused[reason] = *n;
-    }
-  }
+  m.frames_refused = r.counts("frames_refused");
+  m.incomplete = r.boolean("incomplete", false);
+  m.stopped_because = r.string("stopped_because", false);
   return m;
 }
 

@@ -56,6 +56,7 @@
 // (bookkeeper.h); either way it keeps the robot's id.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <functional>
 #include <map>
@@ -66,6 +67,7 @@
 #include <vector>
 
 #include "hermes/agent/agent_pipeline.h"
+#include "hermes/agent/frame_skips.h"
 #include "hermes/agent/tracking_log.h"
 #include "hermes/core/bandwidth_log.h"
 #include "hermes/core/dataset.h"
@@ -146,6 +148,7 @@ struct OfflineAgent {
   };
   std::vector<HeldSend> held;  ///< this step's sends, in the agent's order
   double feeding_stamp = 0;    ///< sim time of the frame being fed
+  FrameSkips skips;            ///< frames that could not be read (skipped, every session)
 };
 
 /// One server restart of the run (metrics.json "server_restarts").
@@ -197,9 +200,16 @@ class OfflineRun {
   /// `progress` is called about every simulated second. Errors: a frame fails to
   /// load or a pipeline rejects it (names agent and frame).
   Status run(const std::function<void(const ProgressInfo&)>& progress = nullptr);
+  /// Thread- and signal-safe: at its next step run() stops feeding frames, flushes
+  /// each agent's window and finishes without waiting for the links (the server
+  /// merges what arrived).
+  void requestStop() { stop_requested_.store(true); }
+  /// True when run() ended before the end of the data (requestStop()).
+  bool stoppedEarly() const { return stopped_early_; }
 
   const std::vector<OfflineAgent>& agents() const { return agents_; }
   const server::Server& server() const { return *server_; }
+  bool hasServer() const { return server_ != nullptr; }  ///< false while it is down
   /// For test/bench hooks (MapManager::setCandidateHook) before run(); use
   /// onServerCreated() for hooks that must survive a restart.
   server::Server& server() { return *server_; }
@@ -293,6 +303,8 @@ class OfflineRun {
   double next_health_ = 0;
   std::size_t health_submaps_ = 0;  ///< the server's submap timings at the last sample
   std::chrono::steady_clock::time_point wall_start_;
+  std::atomic<bool> stop_requested_{false};
+  bool stopped_early_ = false;
   std::map<std::string, std::vector<std::pair<double, double>>> estimates_;
   std::vector<std::size_t> last_transmitted_;
   std::string base_dir_;

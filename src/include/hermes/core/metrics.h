@@ -98,6 +98,10 @@ struct AgentMetrics {
   /// loops tied to the global map (re-localised) and the ones no loop tied
   /// within server.relocalisation_timeout_s (reported as a new robot).
   std::optional<int64_t> sessions, relocalised, reported_new;
+  /// Agent: frames that could not be read and were skipped, and by cause
+  /// ("unreadable", "wrong_size", "wrong_format"); causes omitted when none.
+  std::optional<int64_t> frames_skipped;
+  std::map<std::string, int64_t> frames_skipped_causes;
 };
 
 struct RunMetrics {
@@ -122,6 +126,10 @@ struct RunMetrics {
   /// (per_agent relocalised / reported_new summed).
   std::optional<int64_t> relocalised, robots_new;
   std::optional<int64_t> loops_bridged;  ///< of loops_accepted, bridging tie groups (group_bridge.h)
+  /// Set when the run stopped before the end of its data (an error, Ctrl-C): the
+  /// metrics cover what was tracked until then; `stopped_because` says why.
+  std::optional<bool> incomplete;
+  std::optional<std::string> stopped_because;
 };
 
 void to_json(nlohmann::json& j, const RunMetrics& m);

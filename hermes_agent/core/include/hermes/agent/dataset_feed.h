@@ -10,7 +10,8 @@
 namespace hermes {
 
 /// Frame i of `dataset` as a CameraFrame: stereo (left+right, rectified when the
-/// dataset rectifies) for EuRoC, grey + depth [m] for TUM. Errors name the frame.
+/// dataset rectifies or comes rectified) for EuRoC and KITTI, grey + depth [m] for
+/// TUM / ICL-NUIM. Errors name the image.
 Expected<CameraFrame> loadCameraFrame(const Dataset& dataset, std::size_t i);
 
 /// The calibration of the images loadCameraFrame() hands out (and the
