@@ -28,6 +28,8 @@ RunMetrics fullMetrics() {
   a.submaps_deferred = 1;
   a.rpe_trans_rmse_m = 0.01;
   a.matched_poses = 900;
+  a.frames_skipped = 3;
+  a.frames_skipped_causes = {{"unreadable", 2}, {"wrong_size", 1}};
   m.per_agent.push_back(a);
   AgentMetrics b;  // an agent about which only bandwidth is known
   b.agent = "agent_1";
@@ -43,6 +45,8 @@ RunMetrics fullMetrics() {
   m.alignment = "se3";
   m.T_gt_est = SE3(expSO3(Vec3(0.1, 0.2, 0.3)), Vec3(1, 2, 3));
   m.matched_poses = 900;
+  m.incomplete = true;
+  m.stopped_because = "interrupted at frame 12";
   return m;
 }
 
@@ -129,6 +133,8 @@ TEST(MetricsJson, FileRoundTrip) {
   EXPECT_FALSE(r->per_agent[1].ate_rmse_m.has_value());
   EXPECT_EQ(*r->per_agent[1].bytes, 99);
   EXPECT_DOUBLE_EQ(r->timings_ms.at("tracking").p95, 20.25);
+  EXPECT_EQ(r->per_agent[0].frames_skipped_causes.at("wrong_size"), 1);
+  EXPECT_TRUE(*r->incomplete);
   ASSERT_TRUE(r->T_gt_est.has_value());
   EXPECT_LT((r->T_gt_est->matrix() - m.T_gt_est->matrix()).norm(), 1e-12);
   // nlohmann's ADL route works too.
@@ -168,6 +174,15 @@ TEST(MetricsJson, ErrorsNameFileAndField) {
   auto f = metricsFromJson(j, "inline");
   ASSERT_FALSE(f.ok());
   EXPECT_NE(f.error().find("loops_accepted"), std::string::npos) << f.error();
+
+  j = fullMetrics();
+  j["per_agent"][0]["frames_skipped_causes"]["unreadable"] = "two";
+  auto c = metricsFromJson(j, "inline");
+  ASSERT_FALSE(c.ok());
+  EXPECT_NE(c.error().find("frames_skipped_causes.unreadable"), std::string::npos) << c.error();
+  j = fullMetrics();
+  j["incomplete"] = 1;
+  EXPECT_FALSE(metricsFromJson(j, "inline").ok());
 
   EXPECT_FALSE(metricsFromJson(json::array(), "inline").ok());
   EXPECT_THROW(json::array().get<RunMetrics>(), std::invalid_argument);
