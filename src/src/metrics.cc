@@ -111,6 +111,7 @@ void to_json(json& j, const AgentMetrics& m) {
   if (m.relocalised) j["relocalised"] = *m.relocalised;
   if (m.reported_new) j["reported_new"] = *m.reported_new;
   if (m.frames_skipped) j["frames_skipped"] = *m.frames_skipped;
+  if (m.new_maps) j["new_maps"] = *m.new_maps;
   if (!m.frames_skipped_causes.empty()) j["frames_skipped_causes"] = m.frames_skipped_causes;
 }
 
@@ -300,6 +301,7 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.relocalised = r.integer("relocalised", false);
   a.reported_new = r.integer("reported_new", false);
   a.frames_skipped = r.integer("frames_skipped", false);
+  a.new_maps = r.integer("new_maps", false);
   a.frames_skipped_causes = r.counts("frames_skipped_causes");
   return a;
 }

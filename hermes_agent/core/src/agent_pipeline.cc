@@ -174,6 +174,18 @@ Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
   last_stamp_ = frame.stamp;
   ++frames_;
   if (result->status == TrackingStatus::kOk) {
+    lost_since_ = -1;
+  } else if (result->status == TrackingStatus::kLost) {
+    if (lost_since_ < 0) lost_since_ = frame.stamp;
+    const double after = params_.tracker.reinit_after_s;
+    // Not while recording or replaying tracking: a recording holds one map.
+    if (after > 0 && frame.stamp - lost_since_ >= after && !recorder_) {
+      startNewMap();
+      result = tracker_.feed(frame);  // the new map starts from this frame if it can
+      if (!result.ok()) return Error{"agent " + name_ + ": " + result.error()};
+    }
+  }
+  if (result->status == TrackingStatus::kOk) {
     // Body pose in the odometry world: T_W_B = T_W_C * T_C_B.
     SE3 T_W_B = result->T_W_C * T_C_B_;
     if (corruptor_) T_W_B = corruptor_->onFrame(frame.stamp, T_W_B) * T_W_B;
@@ -341,6 +353,44 @@ void AgentPipeline::retryCarriedWindow(double now) {
   windowStep(now + clock_offset_, /*retry_carry=*/true);
 }
 
+void AgentPipeline::startNewMap() {
+  flushWindow();  // the old map's open window goes out under the old session
+  // A carried or held-back window of the old session cannot join a window of the
+  // new one (its keyframe ids start again): try it once more, else drop it (counted).
+  if (window_worker_) {
+    if (hasCarriedWindow()) {
+      retryCarriedWindow(last_stamp_ - clock_offset_);
+      window_worker_->waitIdle();
+    }
+    WindowJob drop;
+    drop.drop_carry = true;
+    drop.stamp = drop.link_stamp = last_stamp_;
+    window_worker_->push(std::move(drop));
+    window_worker_->waitIdle();
+  } else {
+    if (windows_.carry) windowStep(last_stamp_, /*retry_carry=*/true);
+    if (windows_.carry) {
+      windows_.carry_dropped_keyframes += static_cast<std::int64_t>(windows_.carry->keyframes.size());
+      ++windows_.failed;
+      windows_.carry.reset();
+    }
+    windows_.held.reset();
+  }
+  // The new map continues the odometry frame from the last body pose.
+  const SE3 T_W_B = trajectory_.empty() ? SE3() : trajectory_.back().T_W_B;
+  tracker_.startNewMap(T_W_B * T_C_B_.inverse());
+  if (uplink_) {
+    std::lock_guard<std::mutex> lock(uplink_mu_);
+    auto session = uplink_->buffer().newSession();
+    session_ = session.ok() ? *session : session_ + 1;
+  } else {
+    ++session_;
+  }
+  setWindowIdentity(tracker_, agent_id_, session_);
+  ++new_maps_;
+  lost_since_ = -1;
+}
+
 void AgentPipeline::flushWindow() {
   if (frames_ == 0) return;
   if (window_worker_) {
@@ -381,6 +431,7 @@ AgentMetrics AgentPipeline::metrics() const {
   m.submaps_deferred = w.deferred + w.refused;
   m.weak_frames = replayed ? replayed->total_health.weak : tracker_.totalHealth().weak;
   m.trouble_windows = w.trouble;
+  m.new_maps = new_maps_;
   return m;
 }
 
@@ -454,7 +505,14 @@ void AgentPipeline::runWindowJob(WindowJob& job) {
   const WindowSink* out = have_uplink ? &sink : nullptr;
   WindowCounters& c = stage_windows_;
   TimingStats t;
-  if (!job.window) {
+  if (job.drop_carry) {
+    if (c.carry) {
+      c.carry_dropped_keyframes += static_cast<std::int64_t>(c.carry->keyframes.size());
+      ++c.failed;
+      c.carry.reset();
+    }
+    c.held.reset();
+  } else if (!job.window) {
     if (c.carry) {
       Submap carried = std::move(*c.carry);
       c.carry.reset();

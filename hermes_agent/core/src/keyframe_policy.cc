@@ -22,7 +22,8 @@ Status KeyframePolicyParams::read(const Config& c, const std::string& p) {
                           {"entropy_window", &entropy_window},
                           {"max_frames", &max_frames},
                           {"min_frames", &min_frames},
-                          {"min_tracked", &min_tracked}}) {
+                          {"min_tracked", &min_tracked},
+                          {"few_tracked", &few_tracked}}) {
     s = c.get(p + "." + key, ptr);
     if (!s) return s;
   }
@@ -40,6 +41,7 @@ void KeyframePolicyParams::write(ConfigWriter* w, const std::string& p) const {
   w->set(p + ".max_frames", max_frames);
   w->set(p + ".min_frames", min_frames);
   w->set(p + ".min_tracked", min_tracked);
+  w->set(p + ".few_tracked", few_tracked);
 }
 
 Status KeyframePolicyParams::validate() const {
@@ -56,6 +58,7 @@ Status KeyframePolicyParams::validate() const {
   if (min_frames < 0 || min_frames > max_frames)
     return Error{"keyframe.min_frames must be in [0, max_frames]"};
   if (min_tracked < 0) return Error{"keyframe.min_tracked must be >= 0"};
+  if (few_tracked < 0) return Error{"keyframe.few_tracked must be >= 0 (0 = off)"};
   return Status::Ok();
 }
 
@@ -123,8 +126,9 @@ KeyframeDecision KeyframePolicy::decideWithEntropy(double entropy, const Trackin
     d.by_tracked_ratio =
         double(state.tracked) < params_.min_tracked_ratio * double(state.reference_tracked);
   d.by_max_frames = frames_since_keyframe_ >= params_.max_frames;
+  d.by_few_tracked = state.tracked < params_.few_tracked;
   d.insert = frames_since_keyframe_ >= params_.min_frames &&
-             (d.by_entropy || d.by_tracked_ratio || d.by_max_frames);
+             (d.by_entropy || d.by_tracked_ratio || d.by_max_frames || d.by_few_tracked);
   if (d.insert) frames_since_keyframe_ = 0;
   return d;
 }

@@ -34,6 +34,8 @@ Status TrackerParams::read(const Config& c) {
   }
   Status s = c.get("tracker.relocalise_radius_px", &relocalise_radius_px);
   if (!s) return s;
+  s = c.get("tracker.reinit_after_s", &reinit_after_s);
+  if (!s) return s;
   s = c.get("tracker.trusted_disagreement_px", &trusted_disagreement_px);
   if (!s) return s;
   return validate();
@@ -56,6 +58,7 @@ void TrackerParams::write(ConfigWriter* w) const {
   w->set("tracker.trusted_disagreement_px", trusted_disagreement_px);
   w->set("tracker.relocalise_radius_px", relocalise_radius_px);
   w->set("tracker.relocalise_keyframes", relocalise_keyframes);
+  w->set("tracker.reinit_after_s", reinit_after_s);
 }
 
 Status TrackerParams::validate() const {
@@ -73,6 +76,7 @@ Status TrackerParams::validate() const {
     return Error{"tracker.trusted_disagreement_px must be >= 0 (0 = trusted only)"};
   if (!(relocalise_radius_px > 0)) return Error{"tracker.relocalise_radius_px must be > 0"};
   if (relocalise_keyframes < 0) return Error{"tracker.relocalise_keyframes must be >= 0"};
+  if (!(reinit_after_s >= 0)) return Error{"tracker.reinit_after_s must be >= 0 (0 = never)"};
   return Status::Ok();
 }
 
@@ -278,17 +282,41 @@ Expected<PoseEstimate> Tracker::refineFromPrior(const Correspondences& c,
   return e;
 }
 
+void Tracker::startNewMap(const SE3& T_W_C) {
+  finishMapping();  // nothing of the old map is in flight
+  keyframes_.clear();
+  landmarks_.clear();
+  landmark_angle_.clear();
+  landmark_origin_.clear();
+  lost_before_.clear();
+  lost_since_keyframe_ = false;
+  mapper_ = LocalMapper(params_.mapping, K_, baseline_);
+  policy_.reset();
+  status_ = TrackingStatus::kNotInitialised;
+  have_velocity_ = false;
+  reference_tracked_ = 0;
+  T_W_C_init_ = T_W_C;
+  window_header_.seq = SubmapHeader{}.seq;  // a new session numbers its windows anew
+  window_next_kf_ = 0;
+  window_started_ = false;
+  window_last_t_ = 0;
+  health_ = {};
+  mapped_keyframes_ = 0;
+  waiting_keyframes_ = 0;
+}
+
 bool Tracker::initialise(const CameraFrame& frame, FeatureSet& fs, TrackResult* r) {
   int with_depth = 0;
   for (const auto& k : fs.keypoints) with_depth += k.depth > 0;
   if (with_depth < params_.init_min_points) return false;
-  insertKeyframe(frame.stamp, SE3(), fs, std::vector<int>(fs.size(), -1));
+  insertKeyframe(frame.stamp, T_W_C_init_, fs, std::vector<int>(fs.size(), -1));
   last_stamp_ = frame.stamp;
   status_ = TrackingStatus::kOk;
-  T_C_W_last_ = SE3();
+  T_C_W_last_ = T_W_C_init_.inverse();
   have_velocity_ = false;
   policy_.reset();
   r->status = status_;
+  r->T_W_C = T_W_C_init_;
   r->new_keyframe = true;
   r->tracked = with_depth;
   return true;
@@ -361,7 +389,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   };
   Expected<PoseEstimate> est = solve(was_ok);
   const bool failed = !est.ok() || est->num_inliers < params_.min_tracked;
-  if (failed && !was_ok && params_.relocalise_keyframes > 0) {
+  if (failed && params_.relocalise_keyframes > 0) {
     // Relocalisation without a pose prior: the landmarks of the last keyframes
     // matched by descriptor alone, PnP RANSAC.
     local = localMap(params_.relocalise_keyframes);

@@ -40,6 +40,12 @@ std::unique_ptr<system::OfflineRun> makeMeetingRun(const system::SystemParams& p
                  ::testing::TempDir() + "/hermes_meeting_" + tag, {});
 }
 
+std::unique_ptr<system::OfflineRun> makeRunOn(const system::SystemParams& params, const std::string& dir,
+                                              const std::vector<std::string>& sequences,
+                                              const std::string& tag) {
+  return makeRun(params, dir, sequences, ::testing::TempDir() + "/hermes_run_" + tag, {});
+}
+
 system::SystemParams testRunParams() {
   system::SystemParams p;
   p.run.agent.uplink.buffer.fsync = false;

@@ -22,6 +22,12 @@ std::unique_ptr<system::OfflineRun> makeHallRun(const system::SystemParams& para
 std::unique_ptr<system::OfflineRun> makeMeetingRun(const system::SystemParams& params,
                                                    const std::string& tag);
 
+/// One agent per `sequences` folder under `dir` (rendered in EuRoC layout), spools in
+/// <test temp dir>/hermes_run_<tag>. Null (with a gtest failure) as makeHallRun.
+std::unique_ptr<system::OfflineRun> makeRunOn(const system::SystemParams& params, const std::string& dir,
+                                              const std::vector<std::string>& sequences,
+                                              const std::string& tag);
+
 /// Default system params for tests: the spools do not fsync.
 system::SystemParams testRunParams();
 

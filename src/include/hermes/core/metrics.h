@@ -101,6 +101,8 @@ struct AgentMetrics {
   /// Agent: frames that could not be read and were skipped, and by cause
   /// ("unreadable", "wrong_size", "wrong_format"); causes omitted when none.
   std::optional<int64_t> frames_skipped;
+  /// Agent: new maps started after tracking was lost for tracker.reinit_after_s.
+  std::optional<int64_t> new_maps;
   std::map<std::string, int64_t> frames_skipped_causes;
 };
 

@@ -109,6 +109,8 @@ class AgentPipeline {
   /// Body poses of every successfully tracked frame, in time order.
   const Trajectory& trajectory() const { return trajectory_; }
   std::int64_t frames() const { return frames_; }
+  /// New maps started after a loss (tracker.reinit_after_s), each a new session.
+  std::int64_t newMaps() const { return new_maps_; }
   std::int64_t lostFrames() const { return lost_; }
   /// Fraction of fed frames not tracked (lost, or not yet initialised).
   double lostRate() const { return frames_ > 0 ? double(lost_) / double(frames_) : 0.0; }
@@ -232,6 +234,7 @@ class AgentPipeline {
     double stamp = 0;              ///< [s] tracker time of the step
     double link_stamp = 0;         ///< [s] stamp the uplink clock derives from
     int periods = 1;               ///< window periods it stands for (merged jobs: more)
+    bool drop_carry = false;       ///< a new map began: the old session's carry cannot join
   };
   void startWorkers(bool parallel);
   /// Cuts the due window (or a due retry) and queues it (caller's thread).
@@ -261,6 +264,11 @@ class AgentPipeline {
   std::optional<std::pair<std::uint32_t, std::uint64_t>> last_window_;  ///< last submitted
   bool last_window_acked_ = false;
   std::int64_t frames_ = 0, lost_ = 0;
+  std::int64_t new_maps_ = 0;
+  double lost_since_ = -1;  ///< stamp of the first frame of the current loss; < 0: tracking
+  /// Lost for tracker.reinit_after_s: the open window goes out, then a new map in a
+  /// new session starts at the last body pose (tracking never ends for good).
+  void startNewMap();
   BandwidthMonitor monitor_;
   std::unique_ptr<OdometryCorruptor> corruptor_;
   std::unique_ptr<TrackingLogWriter> recorder_;

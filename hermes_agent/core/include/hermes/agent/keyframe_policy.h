@@ -28,6 +28,9 @@ struct KeyframePolicyParams {
   int max_frames = 20;             ///< frames since the last keyframe (about 1 s at 20 Hz)
   int min_frames = 0;              ///< no keyframe sooner than this after the last one
   int min_tracked = 15;            ///< tracking counts as healthy from this many landmarks
+  /// Fewer tracked landmarks than this -> keyframe (0 = off): the map must renew
+  /// itself before fast motion leaves it behind.
+  int few_tracked = 100;
 
   Status read(const Config& config, const std::string& prefix = "keyframe");
   void write(ConfigWriter* writer, const std::string& prefix = "keyframe") const;
@@ -47,7 +50,7 @@ struct TrackingState {
 
 struct KeyframeDecision {
   bool insert = false;
-  bool by_entropy = false, by_tracked_ratio = false, by_max_frames = false;
+  bool by_entropy = false, by_tracked_ratio = false, by_max_frames = false, by_few_tracked = false;
   double entropy = 0;  ///< CLAHE entropy of this frame [bits] (NaN under `covisibility`)
   double ratio = 1;    ///< r = H / mean(FIFO) (1 while the FIFO is empty)
 };

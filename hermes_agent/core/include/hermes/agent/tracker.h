@@ -95,6 +95,9 @@ struct TrackerParams {
   /// When lost and the projection search fails: match the landmarks of the last N
   /// keyframes to the frame by descriptor alone + PnP RANSAC (0 = off).
   int relocalise_keyframes = 30;
+  /// Lost this long [s] (relocalisation failing every frame): the agent starts a new
+  /// map, a new session the server ties to the old one by loops (0 = never).
+  double reinit_after_s = 1.0;
 
   /// Reads sections orb, stereo, rgbd, matching, pose, keyframe, mapping, window and tracker.
   Status read(const Config& config);
@@ -166,6 +169,11 @@ class Tracker {
   /// keyframe exists. Windows are consecutive: each starts with the keyframe
   /// after the previous window's last one.
   std::optional<Submap> takeWindowIfDue(double t);
+  /// Drops the map (keyframes, landmarks, mapping and window state) and starts
+  /// again: the next frame that can initialise opens a new map whose first keyframe
+  /// sits at T_W_C in the same odometry frame (the last known pose). Keyframe and
+  /// landmark ids start again at 0 (a new session). Parallel mapping finishes first.
+  void startNewMap(const SE3& T_W_C);
   /// Counts tracking as interrupted since the last keyframe (test hook: a
   /// relocalisation the caller simulates); the next keyframe's odometry edge
   /// is weakened as after a real loss.
@@ -212,6 +220,7 @@ class Tracker {
   std::vector<char> lost_before_;           ///< per keyframe: tracking was lost since the previous one
   bool lost_since_keyframe_ = false;
   SE3 T_C_W_last_, T_C_W_prev_;             ///< last two tracked poses
+  SE3 T_W_C_init_;                          ///< first keyframe's pose of a new map
   bool have_velocity_ = false;
   int reference_tracked_ = 0;
   LocalMapper mapper_;
