@@ -9,7 +9,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 OUT="$ROOT/results/rviz/merged.png"
 WAIT=150
-DATA="$ROOT/data_cache/demo/s20_d30_r20"
+DATA="$ROOT/data_cache/demo/s20_d30_r20_realistic"
 RATE=0.25
 while [[ $# -gt 0 ]]; do
   case "$1" in
