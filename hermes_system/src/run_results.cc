@@ -472,7 +472,7 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
   o << buf;
   for (const AgentMetrics& a : m.per_agent) {
     std::snprintf(buf, sizeof buf,
-                  "  %-14s raw ATE %6.2f cm  merged ATE %6.2f cm  lost %5.1f %%  submaps sent %lld "
+                  "  %-14s odometry ATE %6.2f cm  merged ATE %6.2f cm  lost %5.1f %%  submaps sent %lld "
                   "applied %lld deferred %lld  %.1f kB\n",
                   a.agent.c_str(), cm(a.raw_ate_rmse_m), cm(a.merged_ate_rmse_m),
                   100.0 * a.lost_rate.value_or(0), static_cast<long long>(a.submaps_sent.value_or(0)),
