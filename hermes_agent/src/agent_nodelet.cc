@@ -150,7 +150,7 @@ class AgentNodelet : public nodelet::Nodelet {
       NODELET_FATAL("Agent %s: ~queue_size must be >= 1, got %d", robot_.c_str(), queue_size_);
       return;
     }
-    auto config = hermes::agent::loadRunConfig(config_file, {});
+    auto config = hermes::loadConfig(config_file, {});
     hermes::agent::RunParams run;
     if (!config.ok() || !run.read(*config)) {
       NODELET_FATAL("Agent %s: config %s: %s", robot_.c_str(), config_file.c_str(),

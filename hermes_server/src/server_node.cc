@@ -61,7 +61,7 @@
 #include <map>
 #include <memory>
 
-#include "hermes/agent/run_config.h"
+#include "hermes/core/config_file.h"
 #include "hermes/server/server.h"
 #include "hermes/server/server_outputs.h"
 #include "hermes/server/server_worker.h"
@@ -363,7 +363,7 @@ int main(int argc, char** argv) {
   if (std::string key_dir; pnh.getParam("key_dir", key_dir) && !key_dir.empty())
     sets.push_back("server.auth.key_dir=" + key_dir);
   pnh.param("checkpoint_dir", checkpoint_dir, checkpoint_dir);
-  auto config = hermes::agent::loadRunConfig(config_file, sets);
+  auto config = hermes::loadConfig(config_file, sets);
   if (!config.ok()) {
     ROS_FATAL("hermes_server: %s", config.error().c_str());
     return 2;

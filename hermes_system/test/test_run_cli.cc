@@ -191,14 +191,14 @@ TEST(RunCli, ErrorsExitTwoNamingTheCulprit) {
 TEST(RunConfig, ShippedConfigsReadCleanly) {
   for (const char* name : {"hermes.yaml", "euroc_stereo.yaml", "tum_rgbd.yaml"}) {
     const std::string path = std::string(HERMES_SOURCE_DIR) + "/config/" + name;
-    auto config = agent::loadRunConfig(path, {});
+    auto config = loadConfig(path, {});
     ASSERT_TRUE(config.ok()) << config.error();
     auto params = system::readSystemParams(*config);
     EXPECT_TRUE(params.ok()) << name << ": " << params.error();
   }
   // hermes.yaml holds exactly the defaults: config_used of defaults reads back
   // to the same text.
-  auto config = agent::loadRunConfig(std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", {});
+  auto config = loadConfig(std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", {});
   ASSERT_TRUE(config.ok());
   auto params = system::readSystemParams(*config);
   ASSERT_TRUE(params.ok()) << params.error();
@@ -210,7 +210,7 @@ TEST(RunConfig, ShippedConfigsReadCleanly) {
   for (const std::string& key : all->unusedKeys())
     EXPECT_TRUE(shipped->has(key)) << "config/hermes.yaml lacks " << key;
 
-  auto bad = agent::loadRunConfig("", {"tracker.min_trackd=5"});
+  auto bad = loadConfig("", {"tracker.min_trackd=5"});
   ASSERT_TRUE(bad.ok());
   auto p = system::readSystemParams(*bad);
   ASSERT_FALSE(p.ok());

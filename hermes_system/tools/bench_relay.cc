@@ -68,7 +68,7 @@ Expected<nlohmann::json> runOnce(bool relay, const std::string& views, const std
   sets.push_back("link.scenario=" + scenario);
   sets.push_back(std::string("relay.enabled=") + (relay ? "true" : "false"));
   sets.push_back("uplink.buffer.fsync=false");
-  auto config = agent::loadRunConfig("", sets);
+  auto config = loadConfig("", sets);
   if (!config) return Error{config.error()};
   auto params = system::readSystemParams(*config);
   if (!params) return Error{params.error()};
@@ -140,7 +140,7 @@ int main(int argc, char** argv) {
     return std::fprintf(stderr, "hermes_bench_relay: scenario file '%s' does not exist\n", scenario.c_str()), 2;
 
   {  // bad input before any rendering: the overrides and the scenario
-    auto config = agent::loadRunConfig("", sets);
+    auto config = loadConfig("", sets);
     auto params = config ? system::readSystemParams(*config) : Expected<system::SystemParams>(Error{config.error()});
     if (!params) return std::fprintf(stderr, "hermes_bench_relay: %s\n", params.error().c_str()), 2;
     std::vector<std::string> names;

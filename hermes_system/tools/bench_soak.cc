@@ -218,7 +218,7 @@ int main(int argc, char** argv) {
   sets.push_back("system.health_period_s=" + std::to_string(health_period));
   if (server_restart_at >= 0) sets.push_back("system.server_restart_at=[" + std::to_string(server_restart_at) + "]");
   if (robot_restart != "none") sets.push_back("system.agent_reset=" + robot_restart);
-  auto config = agent::loadRunConfig("", sets);
+  auto config = loadConfig("", sets);
   if (!config) return fail(config.error());
   auto params = system::readSystemParams(*config);
   if (!params) return fail(params.error());

@@ -226,7 +226,7 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
   for (const std::string& s : variantSets(v)) sets.push_back(s);
   sets.push_back("link.bandwidth_mbitps=" + bw);
   sets.push_back("uplink.buffer.fsync=false");
-  auto config = agent::loadRunConfig("", sets);
+  auto config = loadConfig("", sets);
   if (!config.ok()) return Error{config.error()};
   auto params = system::readSystemParams(*config);
   if (!params.ok()) return Error{params.error()};

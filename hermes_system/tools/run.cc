@@ -276,7 +276,7 @@ int main(int argc, char** argv) {
   if (!args.scenario.empty()) sets.push_back("link.scenario=" + args.scenario);
   if (!args.record_tracking.empty()) sets.push_back("system.tracking_record_dir=" + args.record_tracking);
   if (!args.replay_tracking.empty()) sets.push_back("system.tracking_replay_dir=" + args.replay_tracking);
-  auto config = agent::loadRunConfig(args.config, sets);
+  auto config = loadConfig(args.config, sets);
   if (!config.ok()) return badInput(config.error());
   auto params = system::readSystemParams(*config);
   if (!params.ok()) return badInput(params.error());

@@ -18,6 +18,7 @@
 #include "hermes/agent/uplink_sender.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/core/wire_synthetic.h"
+#include "hermes/server/submap_receiver.h"
 #include "hermes/transport/mqtt_links.h"
 #include "mosquitto_broker.h"
 

@@ -1,4 +1,4 @@
-#include "hermes/core/config.h"
+#include "hermes/core/config_file.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -228,6 +228,20 @@ std::string ConfigWriter::yaml() const {
     out << std::string(2 * (parts.size() - 1), ' ') << parts.back() << ": " << value << "\n";
   }
   return out.str();
+}
+
+Expected<Config> loadConfig(const std::string& file, const std::vector<std::string>& sets) {
+  Config config;
+  if (!file.empty()) {
+    auto loaded = Config::fromFile(file);
+    if (!loaded.ok()) return Error{loaded.error()};
+    config = std::move(*loaded);
+  }
+  for (const std::string& assignment : sets) {
+    if (Status s = config.applyOverride(assignment); !s)
+      return Error{"--set " + assignment + ": " + s.error()};
+  }
+  return config;
 }
 
 }  // namespace hermes

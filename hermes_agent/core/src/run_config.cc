@@ -50,20 +50,6 @@ void RunParams::write(ConfigWriter* out) const {
   out->set("eval.rpe_tolerance", eval.rpe_tolerance);
 }
 
-Expected<Config> loadRunConfig(const std::string& file, const std::vector<std::string>& sets) {
-  Config config;
-  if (!file.empty()) {
-    auto loaded = Config::fromFile(file);
-    if (!loaded.ok()) return Error{loaded.error()};
-    config = std::move(*loaded);
-  }
-  for (const std::string& assignment : sets) {
-    if (Status s = config.applyOverride(assignment); !s)
-      return Error{"--set " + assignment + ": " + s.error()};
-  }
-  return config;
-}
-
 Status rejectUnreadKeys(const Config& config) {
   const std::vector<std::string> unused = config.unusedKeys();
   if (unused.empty()) return Status::Ok();

@@ -213,7 +213,7 @@ int main(int argc, char** argv) {
     std::cerr << "--mode must be both, sync or parallel\n";
     return 2;
   }
-  auto config = agent::loadRunConfig("", sets);
+  auto config = loadConfig("", sets);
   if (!config.ok()) {
     std::cerr << config.error() << "\n";
     return 2;

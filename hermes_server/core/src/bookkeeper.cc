@@ -53,16 +53,6 @@ SubmapArrival SubmapArrival::of(const Submap& submap, std::size_t bytes) {
   return a;
 }
 
-const char* toString(ArrivalVerdict v) {
-  switch (v) {
-    case ArrivalVerdict::kAccept: return "accept";
-    case ArrivalVerdict::kDuplicate: return "duplicate";
-    case ArrivalVerdict::kStale: return "stale";
-    case ArrivalVerdict::kRejected: return "rejected";
-  }
-  return "?";
-}
-
 const char* toString(SessionAnchor a) {
   switch (a) {
     case SessionAnchor::kNone: return "none";

@@ -29,7 +29,7 @@
 #include <string>
 #include <vector>
 
-#include "hermes/server/submap_receiver.h"
+#include "hermes/core/delivery.h"
 #include "hermes/transport/mqtt_client.h"
 #include "hermes/transport/mqtt_global_pose.h"
 #include "hermes/transport/mqtt_messages.h"

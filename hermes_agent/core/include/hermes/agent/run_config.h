@@ -10,7 +10,7 @@
 #include "hermes/agent/camera_input_params.h"
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/uplink_sender.h"
-#include "hermes/core/config.h"
+#include "hermes/core/config_file.h"
 #include "hermes/core/dataset.h"
 #include "hermes/core/evaluation.h"
 #include "hermes/distill/params.h"
@@ -44,10 +44,6 @@ struct RunParams {
   Status validate() const;
   void write(ConfigWriter* out) const;
 };
-
-/// Builds the run's Config: `file` (empty: no file, all defaults) plus the
-/// overrides in order. Errors name the file or the bad assignment.
-Expected<Config> loadRunConfig(const std::string& file, const std::vector<std::string>& sets);
 
 /// Error listing every key of `config` that no module read (typos), with its origin.
 Status rejectUnreadKeys(const Config& config);

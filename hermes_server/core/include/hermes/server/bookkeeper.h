@@ -60,6 +60,7 @@
 #include <tuple>
 #include <vector>
 
+#include "hermes/core/delivery.h"
 #include "hermes/core/config.h"
 #include "hermes/core/geometry.h"
 #include "hermes/core/map_types.h"
@@ -71,7 +72,6 @@ class ByteReader;
 class ByteWriter;
 }  // namespace server
 
-using RobotId = std::uint32_t;
 
 struct BookkeeperParams {
   bool require_registration = false;
@@ -97,8 +97,7 @@ struct SubmapArrival {
   static SubmapArrival of(const Submap& submap, std::size_t bytes);
 };
 
-enum class ArrivalVerdict { kAccept, kDuplicate, kStale, kRejected };
-const char* toString(ArrivalVerdict v);
+// ArrivalVerdict: hermes/core/delivery.h.
 
 struct ArrivalDecision {
   ArrivalVerdict verdict = ArrivalVerdict::kRejected;
