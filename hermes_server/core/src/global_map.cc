@@ -16,7 +16,7 @@ constexpr char kMagic[4] = {'H', 'G', 'M', 'P'};
 // 1: trajectories as wire-format submap frames (lossy: float information,
 //    observations rebuilt). 2: every field as stored, loops with inliers.
 // 3: + loop inlier keypoint pairs, refined edges (map refinement).
-constexpr std::uint32_t kVersion = 3;
+constexpr std::uint32_t kVersion = 4;
 constexpr std::size_t kKeypointBytes = 4 + 4 + 1 + 4 + 32 + 8;  // + descriptor + landmark
 
 void writeCamera(ByteWriter* w, const PinholeIntrinsics& c) {
@@ -274,12 +274,6 @@ std::vector<std::uint8_t> GlobalMap::toBytes() const {
   for (const auto& [tid, t] : trajectories) writeTrajectory(&w, t);
   w.count(loops.size());
   for (const LoopEdge& l : loops) writeLoop(&w, l);
-  w.count(refined_edges.size());
-  for (const auto& [ends, T] : refined_edges) {
-    w.key(ends.first);
-    w.key(ends.second);
-    w.pose(T);
-  }
   w.pod(crc32(w.out.data(), w.out.size()));
   return w.out;
 }
@@ -318,16 +312,6 @@ Expected<GlobalMap> GlobalMap::fromBytes(const std::vector<std::uint8_t>& bytes,
     if (!matchesValid(map, l))
       return Error{where + "loop " + std::to_string(l.id) + " keeps a keypoint pair the map does not hold"};
     map.loops.push_back(std::move(l));
-  }
-  if (!r.count(&count, 2 * 16 + 56)) return Error{where + "bad refined edge count"};
-  for (std::uint64_t i = 0; i < count; ++i) {
-    KeyframeKey from, to;
-    SE3 T;
-    if (!r.key(&from) || !r.key(&to) || !r.pose(&T))
-      return Error{where + "refined edge " + std::to_string(i) + " damaged"};
-    if (!map.keyframe(from) || !map.keyframe(to))
-      return Error{where + "refined edge " + std::to_string(i) + " joins a keyframe the map does not hold"};
-    map.refined_edges[{from, to}] = T;
   }
   if (!r.atEnd()) return Error{where + "trailing bytes before the CRC"};
   return map;

@@ -19,12 +19,11 @@ using map_manager_detail::msSince;
 Status MapManagerParams::read(const Config& config, const std::string& prefix) {
   for (Status s : {place_recognition.read(config, prefix + "place_recognition."),
                    loop_closure.read(config, prefix + "loop_closure"),
-                   pcm.read(config, prefix + "pcm"), pose_graph.read(config, prefix + "pose_graph"),
-                   refinement.read(config, prefix + "refinement")})
+                   pcm.read(config, prefix + "pcm"), pose_graph.read(config, prefix + "pose_graph")})
     if (!s) return s;
   const std::string p = prefix + "map.";
   struct IntKey { const char* name; int* v; };
-  for (IntKey k : {IntKey{"rig_neighbours", &rig_neighbours},
+  for (IntKey k : {IntKey{"ties_per_loop", &ties_per_loop}, IntKey{"rig_neighbours", &rig_neighbours},
                    IntKey{"max_candidates_per_keyframe", &max_candidates_per_keyframe},
                    IntKey{"spatial_candidates", &spatial_candidates},
                    IntKey{"optimize_every_submaps", &optimize_every_submaps},
@@ -56,8 +55,8 @@ void MapManagerParams::write(ConfigWriter& out, const std::string& prefix) const
   loop_closure.write(&out, prefix + "loop_closure");
   pcm.write(&out, prefix + "pcm");
   pose_graph.write(&out, prefix + "pose_graph");
-  refinement.write(&out, prefix + "refinement");
   const std::string p = prefix + "map.";
+  out.set(p + "ties_per_loop", ties_per_loop);
   out.set(p + "rig_neighbours", rig_neighbours);
   out.set(p + "max_candidates_per_keyframe", max_candidates_per_keyframe);
   out.set(p + "optimize_every_submaps", optimize_every_submaps);
@@ -87,7 +86,7 @@ Status MapManagerParams::validate() const {
   if (!(spatial_max_angle_deg > 0 && spatial_max_angle_deg <= 180))
     return Error{"spatial_max_angle_deg must be in (0, 180]"};
   if (Status s = odometry.validate(); !s) return Error{"odometry: " + s.error()};
-  if (Status s = refinement.validate(); !s) return Error{"refinement: " + s.error()};
+  if (ties_per_loop < 0) return Error{"ties_per_loop must be >= 0"};
   if (min_world_loops < 1) return Error{"min_world_loops must be >= 1"};
   if (loop_threads < 1 || loop_threads > 64) return Error{"loop_threads must be in 1..64"};
   if (duplicate_neighbours < 0) return Error{"duplicate_neighbours must be >= 0"};
@@ -252,7 +251,6 @@ void MapManager::takeReverification(std::uint64_t loop_id, const LoopClosureResu
   if (!e || e->inliers < loop.inliers) return;  // keep the earlier measurement
   e->id = loop.id;
   e->accepted = loop.accepted;
-  map_.refined_edges.erase({loop.a, loop.b});  // a new measurement replaces the refined one
   loop = *e;
   touched_.insert(loop.a);
   touched_.insert(loop.b);
@@ -397,10 +395,8 @@ Expected<PoseGraph> MapManager::buildPoseGraph() const {
       }
       if (prev) {
         auto e = t.odometry.find({prev_id, id});
-        auto refined = map_.refined_edges.find({keyOf(t, prev_id), key});  // map_refinement.h
-        const SE3 T = refined != map_.refined_edges.end() ? refined->second
-                      : e != t.odometry.end()             ? e->second.T_from_to
-                                                          : prev->keyframe.T_A_C.inverse() * kf.keyframe.T_A_C;
+        const SE3 T = e != t.odometry.end() ? e->second.T_from_to
+                                            : prev->keyframe.T_A_C.inverse() * kf.keyframe.T_A_C;
         const Mat6 info = e != t.odometry.end() ? e->second.information
                                                 : bridgeInformation(prev->keyframe, kf.keyframe);
         if (Status s = graph.addOdometryEdge(keyOf(t, prev_id), key, T, info); !s) return Error{s.error()};
@@ -412,9 +408,7 @@ Expected<PoseGraph> MapManager::buildPoseGraph() const {
   if (!fixed) return Error{"no anchored world trajectory yet"};
   for (const LoopEdge& e : map_.loops) {
     if (!e.accepted || !graph.hasNode(e.a) || !graph.hasNode(e.b)) continue;
-    auto refined = map_.refined_edges.find({e.a, e.b});
-    const SE3& T = refined != map_.refined_edges.end() ? refined->second : e.T_a_b;
-    if (Status s = graph.addLoopEdge(e.a, e.b, T, e.information); !s) return Error{s.error()};
+    if (Status s = graph.addLoopEdge(e.a, e.b, e.T_a_b, e.information); !s) return Error{s.error()};
   }
   return graph;
 }
@@ -548,8 +542,6 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
   stats.keyframes = static_cast<int>(added.size());
   stats.landmarks = static_cast<int>(submap.landmarks.size());
   const std::size_t loops_before = map_.loops.size();
-  std::set<std::uint64_t> accepted_before;  // only the refinement needs them (a copy per merge)
-  if (params_.refinement.enabled) accepted_before = accepted_;
   t0 = Clock::now();
   extendKeyframes(extended, &stats);
   stage("extend");
@@ -568,19 +560,6 @@ Expected<MergeStats> MapManager::merge(RobotId robot, const Submap& submap,
     if (Status s = optimize(); !s) return Error{s.error()};
     stats.optimized = true;
     stage("optimize");
-  }
-  if (params_.refinement.enabled) {  // bundle adjustment around the newly accepted loops
-    std::vector<std::uint64_t> fresh;
-    for (std::uint64_t id : accepted_)
-      if (!accepted_before.count(id)) fresh.push_back(id);
-    if (!fresh.empty()) {
-      t0 = Clock::now();
-      refine_diag_.last = refineAroundLoops(&map_, fresh, params_.refinement);
-      stage("map_refinement");
-      refine_diag_.runs += refine_diag_.last.ran;
-      refine_diag_.applied += refine_diag_.last.applied;
-      stats.refined = refine_diag_.last.applied;
-    }
   }
   stats.stage_ms["total"] = msSince(t_total);
   timings_.add("merge_total", stats.stage_ms["total"]);

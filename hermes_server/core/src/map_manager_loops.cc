@@ -108,7 +108,7 @@ std::optional<LoopEdge> MapManager::loopEdge(const KeyframeKey& query, const Key
   for (const Keyframe* k : neighbours(query, &cams)) rig_q.push_back(k->id);
   for (const Keyframe* k : neighbours(candidate, &cams)) rig_c.push_back(k->id);
   const std::size_t n = r.inlier_matches.size();
-  const std::size_t keep = std::min<std::size_t>(n, static_cast<std::size_t>(params_.refinement.ties_per_loop));
+  const std::size_t keep = std::min<std::size_t>(n, static_cast<std::size_t>(params_.ties_per_loop));
   for (std::size_t j = 0; j < keep; ++j) {
     const RigMatch& m = r.inlier_matches[j * n / keep];
     if (m.cam_q < 0 || m.cam_c < 0 || m.cam_q >= static_cast<int>(rig_q.size()) ||

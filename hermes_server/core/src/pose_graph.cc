@@ -21,7 +21,6 @@ Status PoseGraphParams::read(const Config& config, const std::string& prefix) {
                    config.get(p + "odometry_reweight_window", &odometry_reweight_window),
                    config.get(p + "odometry_reweight_max", &odometry_reweight_max),
                    config.get(p + "odometry_reweight_floor", &odometry_reweight_floor),
-                   config.get(p + "odometry_reweight_span", &odometry_reweight_span),
                    config.get(p + "loop_rig_edges", &loop_rig_edges),
                    config.get(p + "anneal_steps", &anneal_steps),
                    config.get(p + "anneal_factor", &anneal_factor),
@@ -49,7 +48,6 @@ void PoseGraphParams::write(ConfigWriter* w, const std::string& prefix) const {
   w->set(p + "odometry_reweight_window", odometry_reweight_window);
   w->set(p + "odometry_reweight_max", odometry_reweight_max);
   w->set(p + "odometry_reweight_floor", odometry_reweight_floor);
-  w->set(p + "odometry_reweight_span", odometry_reweight_span);
   w->set(p + "loop_rig_edges", loop_rig_edges);
   w->set(p + "anneal_steps", anneal_steps);
   w->set(p + "anneal_factor", anneal_factor);
@@ -78,7 +76,6 @@ Status PoseGraphParams::validate() const {
   if (odometry_reweight_window < 0) return Error{"odometry_reweight_window must be >= 0"};
   if (!(odometry_reweight_max >= 1)) return Error{"odometry_reweight_max must be >= 1"};
   if (!(odometry_reweight_floor > 0)) return Error{"odometry_reweight_floor must be > 0"};
-  if (odometry_reweight_span < 0) return Error{"odometry_reweight_span must be >= 0"};
   if (loop_rig_edges < 0) return Error{"loop_rig_edges must be >= 0"};
   if (anneal_steps < 1) return Error{"anneal_steps must be >= 1"};
   if (!(anneal_factor >= 1)) return Error{"anneal_factor must be >= 1"};
@@ -283,23 +280,11 @@ bool PoseGraph::reweightOdometry() {
   std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
   const double typical = std::max(sorted[sorted.size() / 2], params_.odometry_reweight_floor);
   const std::string& scope = params_.odometry_reweight_scope;
-  // Stretches: a bias (a drift the robot did not notice) is a few sigma per
-  // edge but adds up along the path, while noise grows as its square root.
-  std::vector<double> stretch;
-  double typical_stretch = 1;
-  if (params_.odometry_reweight_span >= 2) {
-    stretch = stretchLevels(traj);
-    sorted = stretch;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    typical_stretch = std::max(sorted[sorted.size() / 2], params_.odometry_reweight_floor);
-  }
   bool changed = false;
   for (std::size_t i = 0; i < odometry_.size(); ++i) {
     const double level = scope == "local" ? window[i] : scope == "trajectory" ? whole[i]
                                                                               : std::max(window[i], whole[i]);
-    double ratio = level / typical;
-    if (!stretch.empty()) ratio = std::max(ratio, stretch[i] / typical_stretch);
-    const double scale = std::clamp(ratio, 1.0, params_.odometry_reweight_max);
+    const double scale = std::clamp(level / typical, 1.0, params_.odometry_reweight_max);
     double& current = odometry_scale_[i];
     if (std::abs(scale - current) > 0.1 * current && active(odometry_[i])) changed = true;
     current = scale;
@@ -325,46 +310,6 @@ bool PoseGraph::reweightOdometry() {
     loop_scale_[i] = scale;
   }
   return changed;
-}
-
-std::vector<double> PoseGraph::stretchLevels(const TrajectoryEdges& traj) const {
-  // Per edge, the largest chi2 per degree of freedom of a stretch of 2, 4, ...
-  // up to odometry_reweight_span consecutive odometry edges that holds it: the
-  // stretch's composed measurement against the solved poses of its two ends,
-  // under the composed covariance of its edges (first order, right
-  // perturbations, as composeEdges). A stretch ends at a gap in the chain.
-  std::vector<double> level(odometry_.size(), 0.0);
-  const int span = params_.odometry_reweight_span;
-  for (const auto& [id, edges] : traj) {
-    const int n = static_cast<int>(edges.size());
-    std::vector<Mat6> cov(n);
-    for (int k = 0; k < n; ++k) {
-      const Mat6& L = odometry_[edges[k].second].sqrt_information;
-      cov[k] = (L.transpose() * L).inverse();
-    }
-    for (int k = 0; k < n; ++k) {
-      const Edge& first = odometry_[edges[k].second];
-      SE3 T = first.T_a_b;
-      Mat6 C = cov[k];
-      for (int j = k + 1; j < n && j - k + 1 <= span; ++j) {
-        const Edge& e = odometry_[edges[j].second];
-        if (!(e.a == odometry_[edges[j - 1].second].b)) break;
-        const Mat6 A = e.T_a_b.inverse().adjoint();
-        C = A * C * A.transpose() + cov[j];
-        T = T * e.T_a_b;
-        const int len = j - k + 1;
-        if ((len & (len - 1)) != 0) continue;  // powers of two only
-        const Node& a = nodes_.at(first.a);
-        const Node& b = nodes_.at(e.b);
-        double r[6];
-        RelativePoseError(T, Mat6::Identity())(a.q.data(), a.t.data(), b.q.data(), b.t.data(), r);
-        const Vec6 err = Eigen::Map<const Vec6>(r);
-        const double chi2_dof = err.dot(C.ldlt().solve(err)) / 6.0;
-        for (int m = k; m <= j; ++m) level[edges[m].second] = std::max(level[edges[m].second], chi2_dof);
-      }
-    }
-  }
-  return level;
 }
 
 double PoseGraph::edgeChi2(const Edge& e) const {

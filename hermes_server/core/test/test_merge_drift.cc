@@ -262,33 +262,6 @@ TEST(MergeDrift, SoundOdometryStaysSound) {
   EXPECT_LE(o.sound_merged_rmse, o.sound_odometry_rmse + 0.005);
 }
 
-TEST(MergeDrift, ASmallDriftAddsUpAlongStretchesAndStaysOnItsRobot) {
-  // A tenth of the bias: half a sigma per step, so the per-edge chi2 (and its
-  // mean over +-5 edges or the whole robot) hardly tells the drifting robot
-  // from the sound ones, and least squares splits the drift among them (the
-  // sound robot 1.86x its error without the fault). Along a stretch of k steps
-  // the bias adds up k times while the noise grows as sqrt(k): the stretch
-  // test (odometry_reweight_span) finds the drifting robot, and the sound one
-  // stays where it was. (On whole rendered MH it did not help: the drift also
-  // reaches the others through the drifting robot's biased loops, which this
-  // fixture's exact loops do not model.)
-  PoseGraphParams old_graph;
-  old_graph.odometry_reweight_span = 0;
-  const Outcome clean_old = mergeRobots(Fault::kNone, true, old_graph);
-  const Outcome split = mergeRobots(Fault::kDrift, true, old_graph, 0.1);
-  EXPECT_GT(split.sound_merged_rmse, 1.5 * clean_old.sound_merged_rmse);
-
-  PoseGraphParams graph;  // stretches of up to 64 edges (off by default: see pose_graph.h)
-  graph.odometry_reweight_span = 64;
-  const Outcome clean = mergeRobots(Fault::kNone, true, graph);
-  const Outcome o = mergeRobots(Fault::kDrift, true, graph, 0.1);
-  EXPECT_GT(o.odometry_rmse, 0.05);
-  EXPECT_LT(o.sound_merged_rmse, 1.15 * clean.sound_merged_rmse);
-  EXPECT_LT(o.merged_rmse, 0.3 * o.odometry_rmse);
-  // Without a fault the stretch test changes nothing that matters.
-  EXPECT_LT(std::abs(clean.sound_merged_rmse - clean_old.sound_merged_rmse), 0.1 * clean_old.sound_merged_rmse);
-}
-
 }  // namespace
 }  // namespace server
 }  // namespace hermes

@@ -231,10 +231,10 @@ TEST(PoseGraph, RejectsBadInput) {
   p.loop_loss = "tukeyish";
   EXPECT_FALSE(p.validate().ok());
   PoseGraphParams q;
-  q.odometry_reweight_span = -1;
-  const Status span = q.validate();
-  ASSERT_FALSE(span.ok());
-  EXPECT_NE(span.error().find("odometry_reweight_span"), std::string::npos);
+  q.odometry_reweight_window = -1;
+  const Status window = q.validate();
+  ASSERT_FALSE(window.ok());
+  EXPECT_NE(window.error().find("odometry_reweight_window"), std::string::npos);
 }
 
 }  // namespace

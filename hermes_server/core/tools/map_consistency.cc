@@ -1,5 +1,5 @@
 // hermes_map_consistency: the map-consistency measure of a saved global map
-// (map_refinement.h measureLoopTies): over the accepted loops' kept inlier
+// (map_consistency.h): over the accepted loops' kept inlier
 // keypoint pairs, each side's landmark against the other side's keypoint, as
 // reprojection error [px] and 3-D distance to the keypoint's depth [m].
 //   hermes_map_consistency RUN_DIR/global_map.hgm [--max-px 50]
@@ -11,7 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hermes/server/global_map.h"
-#include "hermes/server/map_refinement.h"
+#include "hermes/server/map_consistency.h"
 
 int main(int argc, char** argv) {
   if (argc < 2 || std::string(argv[1]) == "--help") {
@@ -37,7 +37,6 @@ int main(int argc, char** argv) {
   j["cross_depth_ties"] = c.cross_depth_ties;
   j["cross_dist_rms_m"] = c.cross_dist_rms_m;
   j["cross_dist_median_m"] = c.cross_dist_median_m;
-  j["refined_edges"] = map->refined_edges.size();
   std::cout << j.dump(1) << "\n";
   return 0;
 }

@@ -4,11 +4,10 @@
 // and the loop edges. Landmarks follow their anchor keyframe (the keyframe of
 // their first observation): p_W = T_W_C(anchor) * p_C.
 //
-// Binary file (save/load): "HGMP" magic, version 3, every trajectory field by field
+// Binary file (save/load): "HGMP" magic, version 4, every trajectory field by field
 // (keyframes with keypoints, descriptors and landmark links, landmarks with their
 // anchors and observations, odometry edges), loop edges with their PCM verdicts,
-// inlier counts and kept inlier keypoint pairs, the map refinement's relative
-// poses (map_refinement.h), CRC-32 of everything before it. Other versions are
+// inlier counts and kept inlier keypoint pairs, CRC-32 of everything before it. Other versions are
 // refused with a message naming both. Lossless: a map saved and loaded
 // holds exactly what it held (the server checkpoint embeds it).
 #pragma once
@@ -51,8 +50,8 @@ struct TrajectoryMap {
   std::map<std::pair<KeyframeId, KeyframeId>, OdometryEdge> odometry;
 };
 
-/// One inlier correspondence of a loop closure, kept for the map refinement's
-/// cross-robot ties: keypoint kp_a of keyframe kf_a (in the trajectory of
+/// One inlier correspondence of a loop closure, kept for the map-consistency
+/// measure's cross-robot ties (map_consistency.h): keypoint kp_a of keyframe kf_a (in the trajectory of
 /// LoopEdge::a; the rig's keyframe, not necessarily a itself) sees the same
 /// point as keypoint kp_b of keyframe kf_b (trajectory of LoopEdge::b).
 struct LoopMatch {
@@ -74,7 +73,7 @@ struct LoopEdge {
   bool accepted = false;      ///< by PCM (latest run)
   int inliers = 0;            ///< geometric inliers of the loop closure
   int depth_inliers = 0;      ///< of which with a measured depth in at least one view
-  /// Inlier keypoint pairs kept (server.refinement.ties_per_loop, evenly spaced).
+  /// Inlier keypoint pairs kept (server.map.ties_per_loop, evenly spaced).
   std::vector<LoopMatch> matches;
 };
 
@@ -82,11 +81,6 @@ class GlobalMap {
  public:
   std::map<TrajectoryId, TrajectoryMap> trajectories;
   std::vector<LoopEdge> loops;
-  /// Relative poses T_from_to that the map refinement (map_refinement.h) found
-  /// for pose-graph edges (odometry between consecutive keyframes, loops) inside
-  /// its windows; the pose graph uses them in place of the edge's measurement
-  /// (same information), so that its next solve keeps what the refinement did.
-  std::map<std::pair<KeyframeKey, KeyframeKey>, SE3> refined_edges;
 
   const StoredKeyframe* keyframe(const KeyframeKey& key) const;
   StoredKeyframe* keyframe(const KeyframeKey& key);

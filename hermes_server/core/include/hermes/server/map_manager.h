@@ -25,7 +25,6 @@
 #include "hermes/server/global_map.h"
 #include "hermes/server/group_bridge.h"
 #include "hermes/server/loop_closure.h"
-#include "hermes/server/map_refinement.h"
 #include "hermes/server/pcm.h"
 #include "hermes/server/place_recognition.h"
 #include "hermes/server/pose_graph.h"
@@ -41,8 +40,10 @@ struct MapManagerParams {
   LoopClosureParams loop_closure;            ///< server.loop_closure.*
   PcmParams pcm;                             ///< server.pcm.*
   PoseGraphParams pose_graph;                ///< server.pose_graph.*
-  MapRefinementParams refinement;            ///< server.refinement.*
   // server.map.*
+  /// Inlier keypoint pairs kept per accepted loop (evenly spaced, saved with
+  /// the map) for the map-consistency measure (map_consistency.h); 0 = none.
+  int ties_per_loop = 200;
   int rig_neighbours = 2;              ///< m neighbours per rig side
   int max_candidates_per_keyframe = 3; ///< place candidates verified per keyframe
   /// Map-based candidates: once its robot is anchored, a new keyframe is also
@@ -137,17 +138,9 @@ struct MergeStats {
   int loops_skipped_budget = 0;     ///< closures deferred: over the merge's closure_budget
   int loops_reverify_deferred = 0;  ///< re-verifications after keyframe extensions deferred (budget on)
   bool optimized = false;
-  bool refined = false;        ///< the map refinement ran around this merge's new loops
   /// Wall time of this merge per stage [ms]: store, extend, detect_loops (place
-  /// recognition + closures), pcm, anchoring, optimize, map_refinement, total.
+  /// recognition + closures), pcm, anchoring, optimize, total.
   std::map<std::string, double> stage_ms;
-};
-
-/// What the map refinement (map_refinement.h) did so far.
-struct RefinementDiagnostics {
-  MapRefinementResult last;
-  int runs = 0;      ///< windows solved
-  int applied = 0;   ///< of those, written back
 };
 
 /// What the last pose-graph solve did (diagnostics: where the merged map departs
@@ -243,7 +236,6 @@ class MapManager {
   const GlobalMap& map() const { return map_; }
   const TimingStats& timings() const { return timings_; }
   const GraphDiagnostics& graphDiagnostics() const { return graph_diag_; }
-  const RefinementDiagnostics& refinementDiagnostics() const { return refine_diag_; }
   /// The loop rig's other keyframes around stored keyframe `key` (rig_neighbours,
   /// earlier ones first, never across a loss of tracking); `cams` gets the
   /// cameras of key and then of each neighbour.
@@ -347,7 +339,6 @@ class MapManager {
   GlobalMap map_;
   TimingStats timings_;
   GraphDiagnostics graph_diag_;
-  RefinementDiagnostics refine_diag_;
   std::uint64_t next_loop_id_ = 0;
   int merges_since_optimize_ = 0;
   bool graph_dirty_ = false;

@@ -51,22 +51,6 @@ struct PoseGraphParams {
   int odometry_reweight_window = 5;    ///< [edges] each side (scope local)
   double odometry_reweight_max = 100;  ///< largest covariance scale
   double odometry_reweight_floor = 0.01;  ///< [chi2 per dof] floor of the median
-  /// Stretches too: a drift the robot did not notice is a bias of a few sigma
-  /// per edge that adds up along its path, while noise grows only as its square
-  /// root. Each odometry edge also gets the largest chi2 per dof of the
-  /// stretches of 2, 4, ... up to this many consecutive edges that hold it
-  /// (their composed measurement against the solved ends, under their composed
-  /// covariance), over the median of those values; the larger of that and the
-  /// scope's ratio scales its covariance. 0 or 1 = off (default). Synthetic
-  /// three-robot circle, drift of half a sigma per step, exact loops: the sound
-  /// robot 1.86x its error without the fault (off) -> 1.06x (64). Whole MH_01-05
-  /// with MH_03 drifting 3 % for 30 s (10 Mbit/s, live): the others 0.76 /
-  /// 0.76 / 1.04 / 1.07 cm (off) -> 0.86 / 0.86 / 1.21 / 1.17 (64); clean
-  /// unchanged (0.69 cm). There the drift also reaches the others through the
-  /// drifting robot's loops, whose rigs stand on its odometry (median loop
-  /// error 1.0 -> 2.0-2.7 cm), and the stretch test flags the fast robots'
-  /// stretches too; so off.
-  int odometry_reweight_span = 0;
   /// A loop's rigs place the neighbours of both keyframes with their robots'
   /// odometry, so where that odometry is re-weighted (found wrong) the loop is
   /// biased too: its covariance is scaled by the mean re-weighting scale of the
@@ -251,9 +235,6 @@ class PoseGraph {
   /// Odometry edges of each trajectory (agent, session), in key order.
   using TrajectoryEdges =
       std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::pair<KeyframeKey, std::size_t>>>;
-  /// Per odometry edge: the largest chi2 per dof of the stretches holding it
-  /// (odometry_reweight_span).
-  std::vector<double> stretchLevels(const TrajectoryEdges& traj) const;
   Status addEdge(const KeyframeKey& a, const KeyframeKey& b, const SE3& T_a_b,
                  const Mat6& information, const char* kind, std::vector<Edge>* edges);
   double edgeChi2(const Edge& e) const;
