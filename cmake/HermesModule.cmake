@@ -4,7 +4,10 @@
 # executable per <dir>/test/test_*.cc (linked with <dir>/test/support/*.cc if any).
 # Tests get HERMES_SOURCE_DIR and HERMES_BIN_DIR (the tools' folder); a test whose
 # source mentions HERMES_BIN_DIR depends on the module's tools.
+# A tool's usage text is tools/help/hermes_<stem>.txt (HermesHelp.cmake).
 # Sources are globbed, so adding a file needs no CMake edit (re-run cmake).
+include(${CMAKE_CURRENT_LIST_DIR}/HermesHelp.cmake)
+
 function(hermes_module)
   cmake_parse_arguments(M "" "NAME;DIR" "DEPS" ${ARGN})
   file(GLOB_RECURSE srcs CONFIGURE_DEPENDS ${M_DIR}/src/*.cc)
@@ -33,6 +36,7 @@ function(hermes_module)
       HERMES_TRAJECTORY_DIR="${CMAKE_SOURCE_DIR}/config/trajectories")
     set_target_properties(hermes_${stem} PROPERTIES
       RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/bin)
+    hermes_tool_help(hermes_${stem})
   endforeach()
 
   if(HERMES_BUILD_TESTS)

@@ -91,6 +91,9 @@ cmd_remove() {
   echo "removed $DIR/$robot.key"
 }
 
+for a in "$@"; do  # --help anywhere (e.g. ./hermes keys add --help): the usage, nothing else
+  [[ "$a" == --help || "$a" == -h ]] && { usage; exit 0; }
+done
 sub="${1:-}"
 [[ $# -gt 0 ]] && shift
 case "$sub" in

@@ -11,14 +11,11 @@ or |, or after VAR=value assignments) is checked without running any work:
 
   * the subcommand is one of the `case` branches of main() in ./hermes;
   * every --option it uses appears in that subcommand's --help output
-    (./hermes SUB --help, run only when it cannot build anything: a tool whose
-    binary is not in build/bin or build-noros/bin is reported as
-    "skipped: SUB not built" and does not fail; ./hermes build --help would
-    run setup first, so its options are taken from cmd_build in the script);
-  * ./hermes bench NAME: NAME is a hermes_bench_NAME binary in build/bin or
-    build-noros/bin (or a benchmark the script runs itself, e.g. realtime), its
-    options those of ./hermes bench NAME --help; a NAME with a tools/bench_NAME.cc
-    source but no binary yet is skipped.
+    (./hermes SUB --help, which never builds or installs anything: a tool's
+    text comes from tools/help/, see tools/check_help.py);
+  * ./hermes bench NAME: NAME has its usage text tools/help/hermes_bench_NAME.txt
+    (or is a benchmark the script runs itself, e.g. realtime), its options
+    those of ./hermes bench NAME --help.
 
 Each bad command is printed as FILE:LINE: what is wrong. The last line is
 "readme commands: N checked, M skipped, K bad". Exit 0 when nothing is bad,
@@ -34,17 +31,10 @@ import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HERMES = os.path.join(ROOT, "hermes")
-BUILD = os.environ.get("HERMES_BUILD_DIR", os.path.join(ROOT, "build"))
-BUILD_NOROS = os.environ.get("HERMES_BUILD_NOROS_DIR", os.path.join(ROOT, "build-noros"))
+HELP_DIR = os.path.join(ROOT, "tools", "help")
 SHELL_LANGS = {"", "bash", "sh", "shell"}
 OPERATORS = {"&&", "||", ";", "|", "&", "(", ")", ";;", "|&"}
 HELP_TIMEOUT_S = 120
-
-
-def shown(path):
-    """A build folder as the messages name it: relative to the repository when inside it."""
-    rel = os.path.relpath(path, ROOT)
-    return path if rel.startswith("..") else rel
 
 
 def read(path):
@@ -77,35 +67,6 @@ class Cli:
                 branches[name] = bm.group(2)
         return branches
 
-    def function_body(self, name):
-        m = re.search(r"^%s\(\) \{(.*?)^\}" % re.escape(name), self.script, re.S | re.M)
-        return m.group(1) if m else ""
-
-    @staticmethod
-    def binary(name, dirs):
-        for d in dirs:
-            p = os.path.join(d, "bin", name)
-            if os.path.isfile(p) and os.access(p, os.X_OK):
-                return p
-        return None
-
-    @staticmethod
-    def bench_binaries():
-        names = set()
-        for d in (BUILD, BUILD_NOROS):
-            for p in glob.glob(os.path.join(d, "bin", "hermes_bench_*")):
-                if os.access(p, os.X_OK):
-                    names.add(os.path.basename(p)[len("hermes_bench_"):])
-        return names
-
-    @staticmethod
-    def bench_source(name):
-        for p in glob.glob(os.path.join(ROOT, "**", "tools", "bench_%s.cc" % name), recursive=True):
-            rel = os.path.relpath(p, ROOT)
-            if not rel.startswith(("build", "results", "data_cache")):
-                return rel
-        return None
-
     def run_help(self, argv):
         key = tuple(argv)
         if key not in self.help_cache:
@@ -122,40 +83,15 @@ class Cli:
 
     def help_for(self, sub, rest):
         """(help text, skip reason, error, words consumed after sub) for ./hermes SUB REST."""
-        branch = self.branches[sub]
         if sub == "bench":
             name = rest[0] if rest and not rest[0].startswith("-") else None
             if name is None:
                 out, err = self.run_help(["bench"])
                 return out, None, err, 0
-            if name in self.special_bench:
+            if name in self.special_bench or os.path.isfile(os.path.join(HELP_DIR, "hermes_bench_%s.txt" % name)):
                 out, err = self.run_help(["bench", name])
                 return out, None, err, 1
-            if name in self.bench_binaries():
-                out, err = self.run_help(["bench", name])
-                return out, None, err, 1
-            if self.bench_source(name):
-                return None, "bench %s not built" % name, None, 1
-            return None, None, "no benchmark '%s' (no hermes_bench_%s in %s/bin or %s/bin, no tools/bench_%s.cc)" % (
-                name, name, shown(BUILD), shown(BUILD_NOROS), name), 1
-        tool = re.search(r"run_tool\s+(\S+)", branch)
-        if tool:  # ensure_built: either tree; would build when absent from both
-            if not self.binary(tool.group(1), (BUILD, BUILD_NOROS)):
-                return None, "%s not built" % sub, None, 0
-            out, err = self.run_help([sub])
-            return out, None, err, 0
-        ros_tool = re.search(r"\$BUILD/bin/(hermes_[A-Za-z0-9_]+)", branch)
-        if ros_tool:  # needs the ROS tree; would build it when absent
-            if not self.binary(ros_tool.group(1), (BUILD,)):
-                return None, "%s not built" % sub, None, 0
-            out, err = self.run_help([sub])
-            return out, None, err, 0
-        if "cmd_setup" in branch and sub != "setup":  # --help would install packages first
-            own = re.search(r"\b(cmd_[A-Za-z0-9_]+)\s+\"\$@\"", branch)
-            body = self.function_body(own.group(1)) if own else ""
-            if not body:
-                return None, None, "cannot read the options of '%s' from %s" % (sub, HERMES), 0
-            return body, None, None, 0
+            return None, None, "no benchmark '%s' (no tools/help/hermes_bench_%s.txt)" % (name, name), 1
         out, err = self.run_help([sub])
         return out, None, err, 0
 

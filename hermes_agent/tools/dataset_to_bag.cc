@@ -28,22 +28,10 @@
 
 #include "../src/ros_convert.h"
 #include "hermes/agent/dataset_feed.h"
+#include "hermes_help/hermes_dataset_to_bag.h"  // tools/help/hermes_dataset_to_bag.txt
 
 namespace {
-const char* kUsage =
-    "usage: hermes_dataset_to_bag --dataset DIR --out FILE.bag [--layout hermes|euroc|tum]\n"
-    "                             [--ns NAMESPACE] [--max-frames N] [--depth-offset-ms MS]\n"
-    "Writes DIR (EuRoC ASL stereo or TUM RGB-D folder) as a rosbag.\n"
-    "--layout hermes (default): the Agent nodelet's DatasetPlayer topics under NAMESPACE\n"
-    "  (default agent0): left|right/image_rect + camera_info (stereo, rectified) or\n"
-    "  rgb/image_rect, depth/image_rect, rgb/camera_info (RGB-D).\n"
-    "--layout euroc: EuRoC folder as the published EuRoC bags: /cam0/image_raw and\n"
-    "  /cam1/image_raw, raw (distorted) mono8, no camera_info.\n"
-    "--layout tum: TUM folder as the published TUM bags: /camera/rgb/image_color (rgb8)\n"
-    "  and /camera/depth/image (32FC1, metres), no camera_info; depth stamps moved by a\n"
-    "  fixed pattern of up to MS milliseconds (--depth-offset-ms, default 10; at most 40 %\n"
-    "  of the frame interval; 0 keeps the folder's depth stamps).\n"
-    "Replay: see README.md 'Running on robots and rosbags'.\n";
+const char* const kUsage = hermes_help::kText;
 
 int usageError(const std::string& msg) {
   std::fprintf(stderr, "hermes_dataset_to_bag: %s (see --help)\n", msg.c_str());

@@ -51,20 +51,14 @@
 #include "hermes/distill/distiller.h"
 #include "hermes/distill/keyframe_trimming.h"
 #include "hermes/distill/selectors.h"
+#include "hermes_help/hermes_bench_mapuse.h"  // tools/help/hermes_bench_mapuse.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_bench_mapuse [--duration S] [--map-until S] [--cache DIR] [--json FILE]\n"
-    "                           [--timing-only]\n"
-    "  --duration S   rendered seconds per robot (default 40)\n"
-    "  --map-until S  MH_01 windows before this time build the map (default 25); later\n"
-    "                 MH_01 frames and all MH_02 frames are localised against it\n"
-    "  --cache DIR    rendered data (default data_cache/bench_mapuse)\n"
-    "  --timing-only  skip the map-usefulness part (3.)\n";
+const char* const kUsage = hermes_help::kText;
 
 const std::vector<std::string> kStrategies = {"milp", "greedy_logdet", "stability", "anms", "none"};
 const std::vector<int> kBudgets = {300, 200, 100, 50, 30};

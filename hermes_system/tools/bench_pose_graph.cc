@@ -30,38 +30,14 @@
 #include "hermes/core/evaluation.h"
 #include "hermes/server/pose_graph.h"
 #include "hermes/server/pose_graph_io.h"
+#include "hermes_help/hermes_bench_pose_graph.h"  // tools/help/hermes_bench_pose_graph.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_bench_pose_graph RUN_DIR [--init odometry|file] [--set key=value ...]\n"
-    "                               [--json FILE]\n"
-    "  RUN_DIR   a finished run (./hermes run --out RUN_DIR): pose_graph.g2o,\n"
-    "            pose_graph_nodes.csv, config_used.yaml\n"
-    "  --init    odometry: re-chain each trajectory from its first node (default);\n"
-    "            file: start from the run's final poses\n"
-    "  --set     override a pose-graph parameter, e.g.\n"
-    "            --set server.pose_graph.odometry_reweight_rounds=0\n"
-    "  --loop-information-scale X, --odometry-information-scale X\n"
-    "            multiply every loop (odometry) edge's information by X (what-if)\n"
-    "  --poses FILE   write the solved keyframe positions (common alignment) beside\n"
-    "            ground truth: agent,stamp,x,y,z,gt_x,gt_y,gt_z,error_m\n"
-    "  --ground-truth-loops\n"
-    "            replace every loop's measurement by the ground-truth relative pose\n"
-    "            (what-if: how much do the loops' own errors cost?)\n"
-    "  --edges FILE   write every edge after the solve: kind,agent_a,stamp_a,agent_b,stamp_b,\n"
-    "            residual_m,chi2,weight (weight: robust loss and re-weighting, 1 = fully trusted)\n"
-    "  --incremental-around AGENT:N\n"
-    "            solve incrementally, as a merge does: free the last N nodes of AGENT and\n"
-    "            what server.pose_graph.incremental_hops / incremental_max_free add,\n"
-    "            hold the rest (with --init file: the time a merge's solve takes)\n"
-    "  --align-on A[,B...]\n"
-    "            take the one common alignment from these agents' nodes only (every\n"
-    "            agent is still judged under it): does a robot whose map is off move\n"
-    "            the others, or only the alignment they are judged under?\n";
+const char* const kUsage = hermes_help::kText;
 
 struct NodeInfo {
   std::string agent;

@@ -31,27 +31,14 @@
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
 #include "hermes/system/scenario.h"
+#include "hermes_help/hermes_bench_relay.h"  // tools/help/hermes_bench_relay.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_bench_relay [--duration S] [--data DIR] [--cache DIR] [--scenario FILE]\n"
-    "                          [--set KEY=VALUE]... [--json FILE]\n"
-    "  --duration S     seconds each robot flies (default 20)\n"
-    "  --data DIR       whole-sequence renders of MH_01..03 (default data_cache/mh_full, as\n"
-    "                   bench system --swarm makes them); the robots are windows of them\n"
-    "  --cache DIR      without them: the robots' windows are rendered here once\n"
-    "                   (default data_cache/bench_relay)\n"
-    "  --scenario FILE  who reaches whom (default config/scenarios/relay_outdoor/scenario.txt;\n"
-    "                   robots ground_1, ground_2, aerial_1, aerial_2)\n"
-    "  --set KEY=VALUE  configuration override for both runs (repeatable)\n"
-    "  --json FILE      write the result there instead of stdout\n"
-    "Runs the scenario with relay.enabled true and false: agents merged, merged ATE,\n"
-    "each robot's kB/s (own and relayed), submaps applied exactly once, and the lowest\n"
-    "rate a relayed robot got while relayed (min_relayed_mbitps).\n";
+const char* const kUsage = hermes_help::kText;
 
 struct Robot {
   const char* name;

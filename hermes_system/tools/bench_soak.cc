@@ -31,6 +31,7 @@
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
 #include "hermes/system/tracking_record.h"
+#include "hermes_help/hermes_bench_soak.h"  // tools/help/hermes_bench_soak.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -40,40 +41,7 @@ using hermes::system::bench::split;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_bench_soak --out DIR [options]   (./hermes bench soak)\n"
-    "  A long mission on the simulated clock: robot k flies sequence k mod S (of\n"
-    "  --sequences) in waves of take-offs; each sortie is a new session (it lands,\n"
-    "  takes off with a fresh map and must be re-localised). A link trace\n"
-    "  with losses, outages and dips (or --trace), one server crash (restarted\n"
-    "  from its checkpoint) and one robot crash mid-sortie. Writes the run's\n"
-    "  outputs (metrics.json, health.csv, ate_over_time.csv, ...), DIR/soak.json\n"
-    "  and DIR/plots/soak.png; prints the summary JSON (or --json FILE).\n"
-    "  --robots N         swarm size (default 10)\n"
-    "  --duration S       mission span the waves start over [s] (default 3600)\n"
-    "  --waves W          waves of take-offs, every duration / W s (default 3)\n"
-    "  --sorties K        sorties per robot, K <= W: robot k flies waves (k + j) mod W,\n"
-    "                     j < K (default 1: every robot once, a third of them per wave)\n"
-    "  --stagger S        take-offs within a wave this far apart [s] (default 15)\n"
-    "  --sequences L      (default MH_01_easy,MH_02_easy,MH_03_medium,MH_04_difficult,MH_05_difficult)\n"
-    "  --data DIR         whole-sequence renders (default data_cache/mh_full; rendered there\n"
-    "                     first when missing)\n"
-    "  --tracking-dir DIR the sequences' tracking recordings (<sequence>.htrk, e.g. from\n"
-    "                     `hermes bench system --full mh --tracking-dir DIR`): each sortie\n"
-    "                     replays its sequence's, moved onto the mission clock; without it\n"
-    "                     (or where one does not fit) every sortie is tracked from the images\n"
-    "  --bandwidth M      the generated trace's shared rate [Mbit/s] (default 10): 30 ms,\n"
-    "                     1 % loss; every 600 s a 20-s outage, every 900 s 60 s at a fifth\n"
-    "  --trace FILE       a link trace CSV instead (time_s,rate_mbitps,latency_ms,loss)\n"
-    "  --server-restart-at S  the server crash [s] (default 90: the first wave flying;\n"
-    "                     < 0: none)\n"
-    "  --robot-restart NAME@S  the robot crash (default r03, 40 s into its last sortie;\n"
-    "                     'none': none); after it that robot tracks a fresh map from the images\n"
-    "  --crash-sortie-live  the crashing robot's sortie tracked from the images from its\n"
-    "                     take-off, not replayed until the crash\n"
-    "  --health-period S  server health samples [s] (default 30)\n"
-    "  --set key=value    config override (repeatable)\n"
-    "  --json FILE        write the summary JSON there instead of stdout\n";
+const char* const kUsage = hermes_help::kText;
 
 /// The default soak link: `rate` Mbit/s, 30 ms, 1 % loss; an outage of 20 s
 /// every 600 s (from 300 s) and 60 s at a fifth of the rate every 900 s (from 450 s).

@@ -21,6 +21,7 @@
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
+#include "hermes_help/hermes_run.h"  // tools/help/hermes_run.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -37,54 +38,7 @@ void onInterrupt(int) {
   std::signal(SIGTERM, SIG_DFL);
 }
 
-const char* kUsage =
-    "usage: hermes_run --dataset DIR [--dataset DIR2 ...] --out DIR [--config FILE]\n"
-    "                  [--set key=value ...] [--no-server]\n"
-    "                  [--bandwidth MBITPS | --link-trace FILE | --scenario FILE] [--max-frames N]\n"
-    "                  [--server-restart-at S ...] [--agent-reset NAME@S ...]\n"
-    "                  [--record-tracking DIR] [--replay-tracking DIR]\n"
-    "                  [--no-plots] [--json] [--quiet]\n"
-    "Runs one agent per dataset folder (EuRoC ASL stereo or TUM RGB-D layout). With the\n"
-    "server (default), all agents and the edge server run in one process on a simulated\n"
-    "clock; every agent's uplink crosses ONE shared link (--bandwidth: constant rate in\n"
-    "Mbit/s shared by all agents; --link-trace: CSV time_s,rate_mbitps,latency_ms,loss;\n"
-    "default: config link.* = unlimited). --scenario: a link per robot to the server and\n"
-    "between robots instead ('link FROM TO TRACE' per line, FROM/TO = dataset folder names\n"
-    "or server): robots out of the server's reach hand their submaps to a relay robot they\n"
-    "reach (relay.*; metrics.json then holds 'relay'). Writes\n"
-    "  OUT/config_used.yaml                 every parameter actually used\n"
-    "  OUT/metrics.json                     DESIGN §7 metrics (+ loop accuracy)\n"
-    "  OUT/trajectories/<agent>_raw.tum     each agent's own odometry (body poses, TUM)\n"
-    "  OUT/trajectories/<agent>_merged.tum  its keyframes in the merged world frame\n"
-    "  OUT/trajectories/<agent>_gt.tum      the dataset's ground truth (body, TUM)\n"
-    "  OUT/bandwidth.csv, uplink_estimate.csv, ate_over_time.csv, loops.csv, pose_graph_edges.csv,\n"
-    "  global_map.ply, global_map.hgm (binary map: server::GlobalMap::load)\n"
-    "  OUT/loop_attempts.csv                every loop-closure attempt: place candidate, verdict,\n"
-    "                                       true distance/angle between the two views\n"
-    "  OUT/pose_graph.g2o, pose_graph_nodes.csv  the last pose graph (g2o text; solve it again\n"
-    "                                       with: ./hermes bench pose_graph OUT)\n"
-    "  OUT/plots/*.png                      top view, bandwidth, error over time (merged vs\n"
-    "                                       odometry), pose-graph residuals of the last solve\n"
-    "<agent> is the dataset folder's name. --config: YAML (default: built-in defaults,\n"
-    "see config/hermes.yaml); --set overrides one key (unknown keys are an error).\n"
-    "--no-server: one agent, tracking only. --max-frames: at most N frames per agent.\n"
-    "--server-restart-at S (repeatable): at simulated time S [s] the server is destroyed\n"
-    "as in a crash and, system.server_downtime_s later, created again from its checkpoint\n"
-    "directory (server.checkpoint_dir, default OUT/server_checkpoint, emptied at the start);\n"
-    "metrics.json then holds server_durability and server_restarts.\n"
-    "--agent-reset NAME@S (repeatable; system.agent_reset): at simulated time S [s] agent\n"
-    "NAME restarts with a fresh map and the next session (its spool kept); the server\n"
-    "re-localises it through loops or, after server.relocalisation_timeout_s, reports it\n"
-    "as a new robot (metrics.json relocalised / robots_new, per_agent sessions).\n"
-    "--record-tracking DIR (system.tracking_record_dir): also write every agent's tracking\n"
-    "(per frame status and pose, the raw windows and motion hints) to DIR/<agent>.htrk.\n"
-    "--replay-tracking DIR (system.tracking_replay_dir): load no image, replay that tracking\n"
-    "instead: the same run for any variant / bandwidth, minus the tracking time. Refused\n"
-    "when the recording was made for other frames, dataset or tracker/corruption params.\n"
-    "Both: an agent whose recording in the replay DIR fits is replayed, the others are\n"
-    "tracked and recorded into the record DIR (e.g. one robot corrupted, four replayed).\n"
-    "--json: print metrics.json to stdout instead of the report.\n"
-    "Exit: 0 ok, 1 failure while running, 2 bad input.\n";
+const char* const kUsage = hermes_help::kText;
 
 int badInput(const std::string& msg) {
   std::fprintf(stderr, "hermes_run: %s\n", msg.c_str());

@@ -13,6 +13,7 @@
 #include <opencv2/features2d.hpp>
 
 #include "hermes/core/dataset.h"
+#include "hermes_help/hermes_bench_datasets.h"  // tools/help/hermes_bench_datasets.txt
 
 using namespace hermes;
 
@@ -79,9 +80,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
-      std::printf("usage: hermes_bench_datasets [--dataset DIR] [--json OUT]\n"
-                  "Times dataset opening, frame loading and stereo rectification; checks\n"
-                  "rectified rows on synthetic points and on ORB matches of real images.\n");
+      std::fputs(hermes_help::kText, stdout);
       return 0;
     }
     if ((a == "--dataset" || a == "--json") && i + 1 < argc) {

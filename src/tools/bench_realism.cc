@@ -29,22 +29,14 @@
 #include "hermes/core/render/scene.h"
 #include "hermes/core/render/settings.h"
 #include "hermes/core/trajectory.h"
+#include "hermes_help/hermes_bench_realism.h"  // tools/help/hermes_bench_realism.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_bench_realism [--json FILE] [--real DIR] [--trajectory TUM] [--frames N]\n"
-    "                            [--fast-threshold T] [--set key=value ...]\n"
-    "Compares real EuRoC frames (DIR/mav0/cam{0,1}/data/*.png; default the shared\n"
-    "V1_01 micro clip) with frames rendered along TUM (default V1_01_easy ground\n"
-    "truth): the plain look (render.realistic=false; named rendered_default) and the\n"
-    "realism preset (render.realistic=true, the default of hermes_sim; with\n"
-    "--set overrides). N frames per variant (default 40, spread over the trajectory;\n"
-    "a quarter of them also as static pairs for the noise). Stats per quarter frame;\n"
-    "'inside' = the rendered median lies in the real [min, max].\n";
+const char* const kUsage = hermes_help::kText;
 
 constexpr double kPairDt = 0.05;  // static pair: same pose, next frame time [s]
 

@@ -22,6 +22,7 @@
 #include "hermes/core/render/scene.h"
 #include "hermes/core/render/sensor.h"
 #include "hermes/core/trajectory.h"
+#include "hermes_help/hermes_bench_render.h"  // tools/help/hermes_bench_render.txt
 
 using namespace hermes;
 
@@ -43,10 +44,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help") {
-      std::puts("usage: hermes_bench_render [--json FILE] [--frames N] [--trajectory TUM]\n"
-                "                           [--realistic | --plain] [--set key=value ...]\n"
-                "  --realistic (the default) / --plain / --set: render settings as hermes_sim takes them\n"
-                "  (render.realistic=true / false)");
+      std::fputs(hermes_help::kText, stdout);
       return 0;
     } else if (a == "--realistic") sets.push_back("render.realistic=true");
     else if (a == "--plain") sets.push_back(render::kPlainLook);

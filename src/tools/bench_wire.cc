@@ -15,6 +15,7 @@
 
 #include "hermes/core/wire_format.h"
 #include "hermes/core/wire_synthetic.h"
+#include "hermes_help/hermes_bench_wire.h"  // tools/help/hermes_bench_wire.txt
 
 using namespace hermes;
 using Json = nlohmann::json;
@@ -115,10 +116,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
-      std::printf("usage: hermes_bench_wire [--json FILE] [--seconds S]\n"
-                  "  wire-format byte accounting and encode/decode speed on a typical\n"
-                  "  submap (10 KFs x 800 keypoints, 3000 landmarks); JSON on stdout.\n"
-                  "  --seconds S  time per speed measurement (default 0.5)\n");
+      std::fputs(hermes_help::kText, stdout);
       return 0;
     } else if (a == "--json" && i + 1 < argc) {
       json_path = argv[++i];

@@ -9,41 +9,13 @@
 #include "hermes/core/eval_io.h"
 #include "hermes/core/evaluation.h"
 #include "hermes/core/metrics.h"
+#include "hermes_help/hermes_eval.h"  // tools/help/hermes_eval.txt
 
 using namespace hermes;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_eval --gt GT --est EST [--gt GT2 --est EST2 ...] [options]\n"
-    "\n"
-    "Absolute trajectory error (ATE) and relative pose error (RPE) of estimated\n"
-    "trajectories against ground truth. Several --gt/--est pairs (in order) are one\n"
-    "multi-agent run: each agent is aligned on its own (per-agent ATE) and all agents\n"
-    "together with ONE transform (merged ATE = ate_rmse_m).\n"
-    "\n"
-    "GT / EST: TUM file ('t tx ty tz qx qy qz qw'), EuRoC ground-truth csv\n"
-    "(state_groundtruth_estimate0/data.csv), ICL-NUIM's *.gt.freiburg (frame-index\n"
-    "stamps read at 30 Hz, y mirrored from its fy < 0 convention to the images') or a\n"
-    "dataset folder (EuRoC, TUM RGB-D, ICL-NUIM, KITTI sequences/NN: its ground truth as\n"
-    "./hermes run reads it); the format is detected from the content. Both must use\n"
-    "the same time base [s].\n"
-    "\n"
-    "options:\n"
-    "  --align se3|sim3|first|none  alignment (default se3)\n"
-    "  --max-dt S          max distance to the nearest gt sample [s] (default 0.02)\n"
-    "  --rpe-delta S       RPE pair spacing [s] (default 1.0)\n"
-    "  --rpe-frames N      RPE pair spacing in matched poses (overrides --rpe-delta)\n"
-    "  --rpe-tolerance F   drop a time-based RPE pair when its partner comes more than\n"
-    "                      F * delta late (default 0.1; raise it for sparse keyframes)\n"
-    "  --est-cam YAML      estimates are poses of this camera (EuRoC sensor.yaml with\n"
-    "                      T_BS); they are mapped to the body frame of the ground\n"
-    "                      truth: T_W_B = T_W_C * T_BS^-1 (all pairs)\n"
-    "  --name NAME         agent name for the next --est (default: file stem)\n"
-    "  --json OUT          write the metrics JSON to OUT ('-' = stdout; the table then\n"
-    "                      goes to stderr)\n"
-    "  --help              this text\n"
-    "exit codes: 0 ok, 2 bad arguments or input (one-line reason on stderr), 1 write error\n";
+const char* const kUsage = hermes_help::kText;
 
 [[noreturn]] void fail(const std::string& reason) {
   std::fprintf(stderr, "hermes_eval: %s\n", reason.c_str());

@@ -20,44 +20,13 @@
 #include "hermes/core/render/scene.h"
 #include "hermes/core/render/settings.h"
 #include "hermes/core/trajectory.h"
+#include "hermes_help/hermes_sim.h"  // tools/help/hermes_sim.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
 
 namespace {
-const char* kUsage =
-    "usage: hermes_sim --trajectory GT.txt [--trajectory GT2.txt ...] --out DIR\n"
-    "                  [--format euroc|tum] [--start S] [--duration S] [--rate HZ] [--seed N]\n"
-    "                  [--width W --height H] [--no-noise] [--png-compression 0-9] [--jobs N]\n"
-    "                  [--poor-fraction F] [--realistic | --plain] [--config FILE] [--set key=value ...]\n"
-    "Renders one dataset folder per trajectory (TUM file of the body/IMU pose, e.g.\n"
-    "config/trajectories/MH_01_easy.txt) under DIR/<trajectory stem>, all inside ONE\n"
-    "procedural scene enclosing every trajectory; the scene is described in DIR/scene.json.\n"
-    "  euroc (default): stereo, real EuRoC cam0/cam1 calibration and T_BS, 752x480, 20 Hz;\n"
-    "                   mav0/cam{0,1}/data/<ns>.png, data.csv, sensor.yaml, body.yaml,\n"
-    "                   state_groundtruth_estimate0/data.csv (body pose)\n"
-    "  tum: RGB-D 640x480 f=525 at 30 Hz mounted like EuRoC cam0: rgb/, depth/ (16-bit,\n"
-    "       5000 per metre), rgb.txt, depth.txt, groundtruth.txt (CAMERA pose), camera.yaml\n"
-    "--start/--duration: seconds from each trajectory's first pose (default: all of it).\n"
-    "--seed: scene and sensor seed (default 1); output is byte-identical for a seed.\n"
-    "--jobs: trajectories rendered at once, one thread each (default 1; the output\n"
-    "  does not depend on it).\n"
-    "--poor-fraction: share in [0, 1] of the wall/object panels left near-uniform\n"
-    "  (texture-poor) on the textured faces (default 0.25; one wall and about a fifth\n"
-    "  of the objects are poor regardless). Higher values give views that alternate\n"
-    "  between rich and poor texture (e.g. 0.7 for keyframe-policy ablations).\n"
-    "--realistic (the default; render.realistic: true): the realism preset: photon +\n"
-    "  read noise at the levels measured on real EuRoC frames, motion blur over the\n"
-    "  exposure, dark regions, surface grain, aliasing copies and moving objects.\n"
-    "--plain (render.realistic: false): every effect off, the look of the renders\n"
-    "  the accuracy tests use and of figures made before it was the default. Each effect has its\n"
-    "  own key: render.sensor.{photon_noise, photon_gain, noise_sigma, brightness,\n"
-    "  motion_blur, exposure_s, blur_max_taps}, render.scene.{dark_regions, dark_zones,\n"
-    "  dark_radius_m, dark_level, grain, grain_sigma, grain_scale_texels, aliasing,\n"
-    "  aliasing_copies, moving_objects, moving_speed_mps} (and every other\n"
-    "  render.scene/sensor key).\n"
-    "--config FILE / --set key=value: those keys from a YAML file / one at a time\n"
-    "  (--set wins). The settings used are written to DIR/render_config.yaml.\n";
+const char* const kUsage = hermes_help::kText;
 
 int usageError(const std::string& msg) {
   std::fprintf(stderr, "hermes_sim: %s (see --help)\n", msg.c_str());
