@@ -43,6 +43,7 @@
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/agent/orb_extractor.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/agent/window_cut.h"
 #include "hermes/core/evaluation.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/render/settings.h"
@@ -191,6 +192,7 @@ int main(int argc, char** argv) {
   const DatasetInfo& i1 = (*ds1)->info();
   TrackerParams tp;
   Tracker tracker(tp, i1.K, i1.baseline);
+  WindowCut cut(tracker, tp.window);
   std::vector<Window> windows;
   std::optional<SE3> T_W_A;  // ground-truth world <- map frame A
   OrbExtractor orb(tp.orb);
@@ -213,7 +215,7 @@ int main(int argc, char** argv) {
         SE3 T_W_C;
         if (gtCamera(i1, f->stamp, &T_W_C)) T_W_A = T_W_C * r->T_W_C.inverse();
       }
-      if (auto w = tracker.takeWindowIfDue(f->stamp)) windows.push_back({std::move(*w), tracker.motionHint()});
+      if (auto w = cut.takeWindowIfDue(f->stamp)) windows.push_back({std::move(*w), cut.motionHint()});
     } else if (i % 5 == 0) {
       auto fs = orb.extract(f->left);
       SE3 T_W_C;
@@ -221,7 +223,7 @@ int main(int argc, char** argv) {
         queries_same.push_back({rel, T_W_A->inverse() * T_W_C, fs->keypoints, fs->descriptors});
     }
   }
-  if (auto w = tracker.takeWindowIfDue(t0 + map_until + 100)) windows.push_back({std::move(*w), tracker.motionHint()});
+  if (auto w = cut.takeWindowIfDue(t0 + map_until + 100)) windows.push_back({std::move(*w), cut.motionHint()});
   const DatasetInfo& i2 = (*ds2)->info();
   for (std::size_t i = 0; i < i2.frame_count; i += 10) {
     auto f = loadCameraFrame(**ds2, i);
@@ -240,16 +242,17 @@ int main(int argc, char** argv) {
     if (!ds3.ok()) return std::fprintf(stderr, "cannot open the rendered V1_01 data\n"), 1;
     const DatasetInfo& i3 = (*ds3)->info();
     Tracker tracker_v1(tp, i3.K, i3.baseline);
+    WindowCut cut_v1(tracker_v1, tp.window);
     double last = 0;
     for (std::size_t i = 0; i < i3.frame_count; ++i) {
       auto f = loadCameraFrame(**ds3, i);
       if (!f.ok()) return std::fprintf(stderr, "%s\n", f.error().c_str()), 1;
       auto r = tracker_v1.feed(*f);
       if (!r.ok()) return std::fprintf(stderr, "%s\n", r.error().c_str()), 1;
-      if (auto w = tracker_v1.takeWindowIfDue(f->stamp)) windows_v1.push_back({std::move(*w), tracker_v1.motionHint()});
+      if (auto w = cut_v1.takeWindowIfDue(f->stamp)) windows_v1.push_back({std::move(*w), cut_v1.motionHint()});
       last = f->stamp;
     }
-    if (auto w = tracker_v1.takeWindowIfDue(last + 100)) windows_v1.push_back({std::move(*w), tracker_v1.motionHint()});
+    if (auto w = cut_v1.takeWindowIfDue(last + 100)) windows_v1.push_back({std::move(*w), cut_v1.motionHint()});
   }
   std::fprintf(stderr, "[mapuse] %zu V1_01 windows\n", windows_v1.size());
   std::vector<const Window*> timed;

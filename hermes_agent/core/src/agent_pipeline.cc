@@ -45,13 +45,14 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
       camera_(camera),
       T_C_B_(camera.T_B_C.inverse()),
       tracker_(params.tracker, camera.K, camera.baseline),
+      window_(tracker_, params.tracker.window),
       distiller_(std::move(distiller)),
       monitor_(params.uplink.monitor),
       timings_(static_cast<std::size_t>(params.threads.timing_window)),
       stage_timings_(static_cast<std::size_t>(params.threads.timing_window)) {
   // Agent identity in the window headers: a stable id from the agent's name.
   agent_id_ = agentUuid(name);
-  setWindowIdentity(tracker_, agent_id_, session_);
+  window_.setAgent(agent_id_, session_);
   window_s_ = params.distill.window_s;
   startWorkers(params.threads.parallel);
 }
@@ -121,7 +122,7 @@ Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clo
   }
   session_ = *session;
   clock_offset_ = clock_offset_s;
-  setWindowIdentity(tracker_, agent_id_, session_);
+  window_.setAgent(agent_id_, session_);
   return Status::Ok();
 }
 
@@ -221,7 +222,7 @@ Status AgentPipeline::recordTracking(std::unique_ptr<TrackingLogWriter> writer) 
 }
 
 void AgentPipeline::recordStep(TrackingStep step) {
-  step.motion = tracker_.motionHint();
+  step.motion = window_.motionHint();
   step.window = std::move(tapped_);
   tapped_.reset();
   if (tracking_status_) tracking_status_ = recorder_->append(step);
@@ -253,7 +254,7 @@ Status AgentPipeline::replayTracking(TrackingLog log) {
   if (window_worker_)
     return Error{"agent " + name_ + ": tracking replay needs synchronous mode (agent.parallel: false)"};
   replay_ = std::make_unique<ReplayTracker>(std::move(log));
-  setWindowIdentity(*replay_, agent_id_, session_);
+  replay_->setAgent(agent_id_, session_);
   return Status::Ok();
 }
 
@@ -307,11 +308,11 @@ void AgentPipeline::windowStep(double stamp, bool retry_carry) {
   if (replay_) {
     windowStepOn(*replay_, stamp, retry_carry);
   } else if (recorder_) {
-    WindowTap tap(tracker_);
+    WindowTap tap(window_);
     windowStepOn(tap, stamp, retry_carry);
     if (tap.taken()) tapped_ = std::move(tap.taken());
   } else {
-    windowStepOn(tracker_, stamp, retry_carry);
+    windowStepOn(window_, stamp, retry_carry);
   }
 }
 
@@ -336,7 +337,7 @@ void AgentPipeline::windowStepOn(Source& source, double stamp, bool retry_carry)
 
 void AgentPipeline::setOdometryCorruption(const OdometryCorruptionParams& params) {
   corruptor_ = std::make_unique<OdometryCorruptor>(params);
-  tracker_.setWindowHook([c = corruptor_.get()](Submap* w) { c->apply(w); });
+  window_.setHook([c = corruptor_.get()](Submap* w) { c->apply(w); });
 }
 
 void AgentPipeline::retryCarriedWindow(double now) {
@@ -379,6 +380,7 @@ void AgentPipeline::startNewMap() {
   // The new map continues the odometry frame from the last body pose.
   const SE3 T_W_B = trajectory_.empty() ? SE3() : trajectory_.back().T_W_B;
   tracker_.startNewMap(T_W_B * T_C_B_.inverse());
+  window_.restart();
   if (uplink_) {
     std::lock_guard<std::mutex> lock(uplink_mu_);
     auto session = uplink_->buffer().newSession();
@@ -386,7 +388,7 @@ void AgentPipeline::startNewMap() {
   } else {
     ++session_;
   }
-  setWindowIdentity(tracker_, agent_id_, session_);
+  window_.setAgent(agent_id_, session_);
   ++new_maps_;
   lost_since_ = -1;
 }
@@ -468,13 +470,13 @@ AgentThreadStats AgentPipeline::threadStats() const {
 }
 
 void AgentPipeline::queueWindowStep(double stamp, double link_stamp) {
-  std::optional<Submap> window = tracker_.takeWindowIfDue(stamp);
+  std::optional<Submap> window = window_.takeWindowIfDue(stamp);
   WindowJob job;
   job.stamp = stamp;
   job.link_stamp = link_stamp;
   if (window) {
     job.window = std::move(window);
-    job.motion = tracker_.motionHint();
+    job.motion = window_.motionHint();
   } else {
     // No new window (the robot stands still): a carried one is retried once a
     // period, as runWindowStep does (the published state may be a job old).

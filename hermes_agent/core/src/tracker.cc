@@ -1,7 +1,6 @@
 #include "hermes/agent/tracker.h"
 
 #include <algorithm>
-#include <chrono>
 #include <future>
 #include <set>
 
@@ -82,93 +81,33 @@ Status TrackerParams::validate() const {
 
 Tracker::Tracker(const TrackerParams& params, const PinholeIntrinsics& K, double baseline)
     : params_(params), K_(K), baseline_(baseline), extractor_(params.orb),
-      policy_(params.keyframe), mapper_(params.mapping, K, baseline) {
+      policy_(params.keyframe), mapping_(params.mapping, K, baseline) {
   Status s = params_.validate();
   HERMES_CHECK(s.ok(), s.error());
   HERMES_CHECK(K.fx > 0 && K.fy > 0 && K.width > 0 && K.height > 0, "tracker: bad intrinsics");
 }
 
-Tracker::~Tracker() {
-  if (ba_worker_) ba_worker_->stop();  // the running solve ends; its result is dropped
-}
+Tracker::~Tracker() = default;
 
 void Tracker::setParallelMapping(bool parallel, std::function<void()> before_solve) {
   HERMES_CHECK(keyframes_.empty(), "tracker: set the mapping mode before the first frame");
-  before_solve_ = std::move(before_solve);
-  if (!parallel) {
-    ba_worker_.reset();
-    return;
-  }
-  // One job at a time (capacity 1, never full: scheduleBa pushes only when the
-  // previous job was applied); keyframes arriving meanwhile wait in
-  // waiting_keyframes_ and join the next job.
-  ba_worker_ = std::make_unique<agent::StageWorker<LocalBaJob>>(
-      true, 1,
-      [this](LocalBaJob& job) {
-        solveLocalBa(&job);
-        std::lock_guard<std::mutex> l(done_mu_);
-        done_ = std::move(job);
-      },
-      nullptr);
+  mapping_.setParallel(parallel, std::move(before_solve));
 }
 
-std::size_t Tracker::mappedKeyframes() const {
-  return ba_worker_ ? std::min(mapped_keyframes_, keyframes_.size()) : keyframes_.size();
-}
+std::size_t Tracker::mappedKeyframes() const { return mapping_.mappedKeyframes(keyframes_.size()); }
 
 void Tracker::pollMapping() {
-  if (!ba_worker_) return;
-  if (ba_in_flight_) {
-    std::optional<LocalBaJob> job;
-    {
-      std::lock_guard<std::mutex> l(done_mu_);
-      job.swap(done_);
-    }
-    if (job) {
-      applyFinishedBa(*job);
-      ba_in_flight_ = false;
-    }
-  }
-  scheduleBa();
-}
-
-void Tracker::scheduleBa() {
-  if (ba_in_flight_ || waiting_keyframes_ == 0) return;
-  std::optional<LocalBaJob> job = mapper_.cutBa(keyframes_, landmarks_, ba_scales_);
-  const int waiting = waiting_keyframes_;
-  waiting_keyframes_ = 0;
-  if (!job) {  // BA off or too few keyframes: nothing to wait for
-    mapped_keyframes_ = keyframes_.size();
-    return;
-  }
-  // The job frees the newest ba_window keyframes: older waiting ones are skipped.
-  const int covered = std::min(waiting, mapper_.params().ba_window);
-  mapping_stats_.merged += covered - 1;
-  mapping_stats_.skipped += waiting - covered;
-  job->before_solve = before_solve_;
-  ba_in_flight_ = true;
-  ba_worker_->push(std::move(*job));
-}
-
-void Tracker::applyFinishedBa(const LocalBaJob& job) {
-  LocalMappingStats st;
-  mapper_.applyBa(job, &keyframes_, &landmarks_, &st);
-  ++mapping_stats_.ba_jobs;
-  mapping_stats_.ba_ms_total += st.ba_ms;
-  mapping_stats_.ba_ms_max = std::max(mapping_stats_.ba_ms_max, st.ba_ms);
-  mapped_keyframes_ = std::max(mapped_keyframes_, std::size_t(job.newest) + 1);
-  if (!job.summary) return;
+  const std::optional<SE3> correction = mapping_.poll({&keyframes_, &landmarks_});
+  if (!correction) return;
   // The motion model follows the newest adjusted keyframe, like the keyframes
-  // and landmarks created after the cut (applyBa).
-  const SE3 correction = keyframes_[job.newest].T_A_C * job.T_W_newest.inverse();  // W <- W
-  T_C_W_last_ = T_C_W_last_ * correction.inverse();
-  T_C_W_prev_ = T_C_W_prev_ * correction.inverse();
+  // and landmarks created after the cut (LocalMapper::applyBa).
+  T_C_W_last_ = T_C_W_last_ * correction->inverse();
+  T_C_W_prev_ = T_C_W_prev_ * correction->inverse();
 }
 
 void Tracker::finishMapping() {
-  if (!ba_worker_) return;
-  while (ba_in_flight_ || waiting_keyframes_ > 0) {
-    ba_worker_->waitIdle();
+  while (mapping_.busy()) {
+    mapping_.waitIdle();
     pollMapping();
   }
 }
@@ -235,7 +174,7 @@ void Tracker::insertKeyframe(double stamp, const SE3& T_W_C, const FeatureSet& f
       landmarks_.push_back(l);
       landmark_angle_.push_back(fs.angles[i]);
       landmark_origin_.push_back(kf.id);
-      mapper_.noteCreated(l.id, kf.id);
+      mapping_.mapper().noteCreated(l.id, kf.id);
       id = l.id;
     }
     if (id == kInvalidId) continue;
@@ -256,7 +195,7 @@ std::vector<std::size_t> Tracker::localMap(int keyframes) const {
       keyframes_.size() > std::size_t(keyframes) ? keyframes_.size() - keyframes : 0;
   for (std::size_t k = first; k < keyframes_.size(); ++k)
     for (LandmarkId id : keyframes_[k].keypoint_landmark)
-      if (id != kInvalidId && !mapper_.isBad(id)) ids.insert(id);
+      if (id != kInvalidId && !mapping_.mapper().isBad(id)) ids.insert(id);
   return {ids.begin(), ids.end()};
 }
 
@@ -290,19 +229,13 @@ void Tracker::startNewMap(const SE3& T_W_C) {
   landmark_origin_.clear();
   lost_before_.clear();
   lost_since_keyframe_ = false;
-  mapper_ = LocalMapper(params_.mapping, K_, baseline_);
+  mapping_.reset();
   policy_.reset();
   status_ = TrackingStatus::kNotInitialised;
   have_velocity_ = false;
   reference_tracked_ = 0;
   T_W_C_init_ = T_W_C;
-  window_header_.seq = SubmapHeader{}.seq;  // a new session numbers its windows anew
-  window_next_kf_ = 0;
-  window_started_ = false;
-  window_last_t_ = 0;
   health_ = {};
-  mapped_keyframes_ = 0;
-  waiting_keyframes_ = 0;
 }
 
 bool Tracker::initialise(const CameraFrame& frame, FeatureSet& fs, TrackResult* r) {
@@ -329,7 +262,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
   pollMapping();  // parallel mapping: a finished BA enters the map here
   TrackResult r;
   if (status_ == TrackingStatus::kNotInitialised) {
-    if (initialise(frame, fs, &r)) mapped_keyframes_ = keyframes_.size();
+    if (initialise(frame, fs, &r)) mapping_.startMap(keyframes_.size());
     return r;
   }
 
@@ -431,7 +364,7 @@ Expected<TrackResult> Tracker::feed(const CameraFrame& frame) {
       if (est->inlier[i]) found[corr_landmark[i]] = true;
     for (std::size_t id : local) {
       const Vec3 pc = est->T_C_W * landmarks_[id].p_A;
-      if (pc.z() > 0 && K_.inImage(K_.project(pc))) mapper_.noteVisible(id, found[id]);
+      if (pc.z() > 0 && K_.inImage(K_.project(pc))) mapping_.mapper().noteVisible(id, found[id]);
     }
   }
   // The reference count is that of the first frame tracked after the last
@@ -465,28 +398,9 @@ void Tracker::noteHealth(const TrackResult& r) {
 }
 
 void Tracker::runLocalMapping(TrackResult* r, const std::vector<float>& scales) {
-  ++mapping_stats_.keyframes;
-  if (ba_worker_) {  // structure now, the BA on the mapper thread
-    const auto t0 = std::chrono::steady_clock::now();
-    mapper_.processStructure(&keyframes_, &landmarks_, scales, &r->mapping);
-    ba_scales_ = scales;  // the same pyramid for every frame
-    ++waiting_keyframes_;
-    mapping_stats_.max_waiting =
-        std::max<std::int64_t>(mapping_stats_.max_waiting, waiting_keyframes_);
-    scheduleBa();
-    r->mapping.total_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    mapping_stats_.structure_ms_total += r->mapping.total_ms;
-    mapping_stats_.structure_ms_max = std::max(mapping_stats_.structure_ms_max, r->mapping.total_ms);
-    return;
-  }
   const SE3 before = keyframes_.back().T_A_C;
-  r->mapping = mapper_.process(&keyframes_, &landmarks_, scales);
-  if (r->mapping.ba_ms > 0) {
-    ++mapping_stats_.ba_jobs;
-    mapping_stats_.ba_ms_total += r->mapping.ba_ms;
-    mapping_stats_.ba_ms_max = std::max(mapping_stats_.ba_ms_max, r->mapping.ba_ms);
-  }
+  r->mapping = mapping_.insert({&keyframes_, &landmarks_}, scales);
+  if (mapping_.parallel()) return;  // the BA's correction arrives with a later poll
   // The newest keyframe is the current frame: carry its correction into the
   // motion model (both poses, so the velocity is kept).
   const SE3 T_W_C = keyframes_.back().T_A_C;
@@ -496,34 +410,14 @@ void Tracker::runLocalMapping(TrackResult* r, const std::vector<float>& scales) 
   r->T_W_C = T_W_C;
 }
 
-void Tracker::setAgent(const Uuid& agent, std::uint32_t session) {
-  window_header_.agent = agent;
-  window_header_.session = session;
-}
-
-std::optional<Submap> Tracker::takeWindowIfDue(double t) {
-  if (keyframes_.empty()) return std::nullopt;
-  if (!window_started_) {
-    window_started_ = true;
-    window_last_t_ = keyframes_.front().stamp;
-  }
-  const std::size_t last = mappedKeyframes();  // a consistent point (see the header)
-  if (t - window_last_t_ < params_.window.period_s || window_next_kf_ >= last)
-    return std::nullopt;
-  Submap s = buildWindow(keyframes_, landmarks_, lost_before_, window_next_kf_, last, K_,
-                         window_header_, params_.window);
-  if (window_hook_) window_hook_(&s);
-  ++window_header_.seq;
-  window_next_kf_ = last;
-  window_last_t_ = t;
-  window_health_ = health_;
+distill::TrackingHealth Tracker::takeWindowHealth() {
+  distill::TrackingHealth h = health_;
   health_ = {};
-  return s;
+  return h;
 }
 
 distill::MotionHint Tracker::motionHint() const {
   distill::MotionHint h;
-  h.health = window_health_;
   if (status_ != TrackingStatus::kOk || !have_velocity_) return h;
   h.valid = true;
   h.T_A_C = T_C_W_last_.inverse();

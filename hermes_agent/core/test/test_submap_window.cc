@@ -5,6 +5,7 @@
 
 #include "hermes/agent/submap_window.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/agent/window_cut.h"
 #include "room_sequence.h"
 
 using namespace hermes;
@@ -13,13 +14,14 @@ TEST(SubmapWindow, ConsecutiveWindowsAreValidAndChain) {
   TrackerParams p;
   p.window.period_s = 0.5;
   Tracker tracker(p, test::roomK(), 0.11);
-  tracker.setAgent(uuidFromSeed(4), 2);
+  WindowCut cut(tracker, p.window);
+  cut.setAgent(uuidFromSeed(4), 2);
   std::vector<Submap> windows;
   std::vector<distill::MotionHint> hints;
   auto st = test::runRoomSequence(&tracker, true, 40, [&](double t, const TrackResult&) {
-    if (auto w = tracker.takeWindowIfDue(t)) {
+    if (auto w = cut.takeWindowIfDue(t)) {
       windows.push_back(std::move(*w));
-      hints.push_back(tracker.motionHint());
+      hints.push_back(cut.motionHint());
     }
   });
   ASSERT_GT(st.frames, 0) << "opencv-doc photos missing";
@@ -73,8 +75,8 @@ TEST(SubmapWindow, ConsecutiveWindowsAreValidAndChain) {
     EXPECT_GT(windows[w + 1].header.t_start, windows[w].header.t_end);
   }
   // Whatever is left, then nothing new: no window.
-  tracker.takeWindowIfDue(100.0);
-  EXPECT_FALSE(tracker.takeWindowIfDue(200.0).has_value());
+  cut.takeWindowIfDue(100.0);
+  EXPECT_FALSE(cut.takeWindowIfDue(200.0).has_value());
 }
 
 TEST(SubmapWindow, ParamsValidate) {
@@ -132,9 +134,10 @@ TEST(SubmapWindow, DeferredWindowMergesIntoTheNextAndCanBeBounded) {
   TrackerParams p;
   p.window.period_s = 0.5;
   Tracker tracker(p, test::roomK(), 0.11);
+  WindowCut cut(tracker, p.window);
   std::vector<Submap> windows;
   auto st = test::runRoomSequence(&tracker, true, 40, [&](double t, const TrackResult&) {
-    if (auto w = tracker.takeWindowIfDue(t)) windows.push_back(std::move(*w));
+    if (auto w = cut.takeWindowIfDue(t)) windows.push_back(std::move(*w));
   });
   ASSERT_GT(st.frames, 0) << "opencv-doc photos missing";
   ASSERT_GE(windows.size(), 3u);

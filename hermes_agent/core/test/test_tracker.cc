@@ -5,6 +5,7 @@
 
 #include "frontend_synthetic.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/agent/window_cut.h"
 #include "plane_scene.h"
 #include "room_sequence.h"
 
@@ -144,10 +145,11 @@ TEST(Tracker, CountsLostAndWeakFramesPerWindowForTheDistiller) {
   distill::TrackingHealth total, window, next;
   const GapRun g = runBlankGap(7, 8, 16, params, [&](Tracker& t) {
     total = t.totalHealth();
-    ASSERT_TRUE(t.takeWindowIfDue(100.0).has_value());
-    window = t.motionHint().health;
-    EXPECT_FALSE(t.takeWindowIfDue(200.0).has_value());  // no new keyframe: no window
-    next = t.motionHint().health;
+    WindowCut cut(t, params.window);
+    ASSERT_TRUE(cut.takeWindowIfDue(100.0).has_value());
+    window = cut.motionHint().health;
+    EXPECT_FALSE(cut.takeWindowIfDue(200.0).has_value());  // no new keyframe: no window
+    next = cut.motionHint().health;
   });
   ASSERT_EQ(g.status.size(), 16u) << "opencv-doc photos missing";
   EXPECT_EQ(total.frames, 15);  // the first frame initialises

@@ -1,12 +1,16 @@
-// One agent, ROS-free, one door in: feed(frame). Tracks with the front end
-// (Tracker), keeps the body trajectory in the dataset's ground-truth frame
-// convention (T_W_B = T_W_C * T_B_C^-1; W is the odometry frame = first camera
-// pose), counts lost frames and times each stage. The 5-s window -> distill ->
-// encode step (window_step.h) runs whenever the tracker hands out a window
-// (Tracker::takeWindowIfDue). With an uplink attached (attachUplink) the encoded
-// submaps go to an UplinkSender (disk spool, exactly-once delivery through the
-// caller's transport) and the coordinator plans with its measured bandwidth and
-// backlog; without one they are only counted (single-agent runs).
+// One agent, ROS-free, one door in: feed(frame). Its stages, in the order
+// feed() runs them:
+//   tracking (Tracker: features, pose, keyframe policy)
+//   -> local mapping of each new keyframe (MappingStage, inside the tracker: the
+//      motion model follows what the BA moves)
+//   -> window cut every window period (WindowCut: the map since the last window)
+//   -> distillation and encoding (window_step.h, distill::Distiller)
+//   -> uplink (UplinkSender: disk spool, exactly-once delivery through the
+//      caller's transport; the coordinator plans with its measured bandwidth and
+//      backlog; without an uplink the submaps are only counted).
+// It keeps the body trajectory in the dataset's ground-truth frame convention
+// (T_W_B = T_W_C * T_B_C^-1; W is the odometry frame = first camera pose),
+// counts lost frames, starts a new map after a long loss, and times each stage.
 //
 // Threads (agent_threads.h, DESIGN §9). Synchronous mode (params.threads.parallel
 // false, config `agent.parallel: false`, the default): every stage runs inside
@@ -14,7 +18,7 @@
 // offline runner and the tests rely on it). Parallel mode (`agent.parallel:
 // true` or setParallel(true) before the first frame; the nodelet's choice):
 // feed() tracks and returns without waiting for local BA (mapper thread,
-// tracker.h) or the window step (uplink thread: distill, encode, spool, send;
+// mapping_stage.h) or the window step (uplink thread: distill, encode, spool, send;
 // bounded queue, windows merged when it is full, never dropped). Then:
 //  * feed(), onAck(), pollUplink(), flushWindow(), retryCarriedWindow() and the
 //    accessors are called from one thread at a time (the caller's; the nodelet
@@ -51,6 +55,7 @@
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/tracking_source.h"
 #include "hermes/agent/uplink_sender.h"
+#include "hermes/agent/window_cut.h"
 #include "hermes/agent/window_step.h"
 #include "hermes/core/global_pose.h"
 #include "hermes/core/metrics.h"
@@ -248,7 +253,8 @@ class AgentPipeline {
   std::string name_;
   AgentCamera camera_;
   SE3 T_C_B_;
-  Tracker tracker_;
+  Tracker tracker_;    ///< tracking, keyframes, local mapping (mapping_stage.h)
+  WindowCut window_;   ///< the map since the last window, every window period
   std::unique_ptr<distill::Distiller> distiller_;
   Trajectory trajectory_;
   Uuid agent_id_{};

@@ -4,27 +4,12 @@
 // local map, robust motion-only pose optimisation (PnP RANSAC when the
 // prediction fails or after a loss: relocalisation against the local map), and
 // the keyframe policy decides when a new keyframe adds fresh depth landmarks.
-// Each new keyframe runs local mapping (local_mapper.h: landmark culling,
-// two-view triangulation against covisible keyframes, windowed bundle adjustment). Every window period the map since the previous
-// window can be taken as a Submap for distillation (takeWindowIfDue).
-// Landmark fusion merges duplicates seen by the newest keyframe.
-//
-// Parallel mapping (setParallelMapping, DESIGN §9 agent threads): the local
-// bundle adjustment then runs on a mapper thread and feed() never waits for it.
-// Culling, triangulation and fusion still run on insertion (they change ids the
-// tracker uses; they are short); the BA window is cut as a job of copies
-// (LocalMapper::cutBa), solved on the mapper thread, and written back by feed()
-// itself at the start of a later frame (LocalMapper::applyBa: a short critical
-// section on the caller's thread, so the map has a single writer and needs no
-// lock). Keyframes and landmarks created while a BA runs are kept and follow
-// the newest adjusted keyframe's correction; so does the motion model.
-// Policy (bounded: at most one BA job waits or runs): keyframes are never
-// dropped; keyframes inserted while a BA runs wait and are merged into the next
-// job, which adjusts the newest mapping.ba_window keyframes: waiting keyframes
-// older than that window get no BA of their own (counted as skipped). Windows
-// (takeWindowIfDue) end at the newest keyframe whose BA has been applied, a
-// consistent point: every keyframe handed out was adjusted (or skipped) once,
-// as in synchronous mode; the later ones go to the next window.
+// Each new keyframe runs the local-mapping stage (mapping_stage.h: culling,
+// triangulation, fusion, windowed bundle adjustment, in the frame's step or with
+// the BA on a mapper thread); the motion model follows what it moves. The
+// window cut (window_cut.h) hands the map on to distillation, up to
+// mappedKeyframes(): in parallel mapping the newest keyframe whose BA has been
+// applied, a consistent point, as in synchronous mode.
 #pragma once
 
 #include <cstdint>
@@ -41,10 +26,10 @@
 #include "hermes/agent/feature_matching.h"
 #include "hermes/agent/keyframe_policy.h"
 #include "hermes/agent/local_mapper.h"
+#include "hermes/agent/mapping_stage.h"
 #include "hermes/agent/orb_extractor.h"
 #include "hermes/agent/pose_estimation.h"
 #include "hermes/agent/rgbd_depth.h"
-#include "hermes/agent/stage_worker.h"
 #include "hermes/agent/stereo_matcher.h"
 #include "hermes/agent/submap_window.h"
 #include "hermes/core/config.h"
@@ -118,18 +103,6 @@ struct TrackResult {
   LocalMappingStats mapping;  ///< filled when new_keyframe (T_W_C is then the optimised pose)
 };
 
-/// Counters of the local mapping stage (see the policy above).
-struct MappingStageStats {
-  std::int64_t keyframes = 0;   ///< keyframes inserted after the first
-  std::int64_t ba_jobs = 0;     ///< local BAs run (parallel: every job applied, solved or not)
-  std::int64_t merged = 0;      ///< keyframes whose BA was merged into a later job
-  std::int64_t skipped = 0;     ///< keyframes left out of every BA window (mapper behind)
-  std::int64_t max_waiting = 0; ///< most keyframes waiting for a BA at once
-  double ba_ms_total = 0, ba_ms_max = 0;  ///< solve times (on the mapper thread if parallel) [ms]
-  /// Parallel: culling, triangulation and fusion, which stay in feed() [ms].
-  double structure_ms_total = 0, structure_ms_max = 0;
-};
-
 class Tracker {
  public:
   Tracker(const TrackerParams& params, const PinholeIntrinsics& K, double baseline);
@@ -142,13 +115,13 @@ class Tracker {
   /// frame. `before_solve` (test hook, may be empty) runs on the mapper thread
   /// before every solve, e.g. to hold the mapper back.
   void setParallelMapping(bool parallel, std::function<void()> before_solve = {});
-  bool parallelMapping() const { return ba_worker_ != nullptr; }
+  bool parallelMapping() const { return mapping_.parallel(); }
   /// Parallel mapping: waits for the running BA, applies it and runs the BA of
   /// the keyframes still waiting, until none waits (end of sequence / flush).
   /// No-op in synchronous mode.
   void finishMapping();
   /// Counters of the local mapping stage (both modes).
-  MappingStageStats mappingStats() const { return mapping_stats_; }
+  MappingStageStats mappingStats() const { return mapping_.stats(); }
   /// Keyframes a window may hand out: all in synchronous mode, those up to the
   /// newest adjusted one in parallel mode.
   std::size_t mappedKeyframes() const;
@@ -158,18 +131,13 @@ class Tracker {
 
   const std::vector<Keyframe>& keyframes() const { return keyframes_; }
   const std::vector<Landmark>& landmarks() const { return landmarks_; }
+  /// Per keyframe: tracking was lost between it and the previous one.
+  const std::vector<char>& lostBefore() const { return lost_before_; }
+  const PinholeIntrinsics& intrinsics() const { return K_; }
   TrackingStatus status() const { return status_; }
-  bool isLandmarkBad(LandmarkId id) const { return mapper_.isBad(id); }
+  bool isLandmarkBad(LandmarkId id) const { return mapping_.mapper().isBad(id); }
 
-  /// Identity written into the headers of the windows.
-  void setAgent(const Uuid& agent, std::uint32_t session);
-  /// The keyframes inserted since the previous window once `t` is at least
-  /// window.period_s after the previous window's hand-over (the first window
-  /// is due period_s after the first keyframe); nullopt otherwise or if no new
-  /// keyframe exists. Windows are consecutive: each starts with the keyframe
-  /// after the previous window's last one.
-  std::optional<Submap> takeWindowIfDue(double t);
-  /// Drops the map (keyframes, landmarks, mapping and window state) and starts
+  /// Drops the map (keyframes, landmarks, mapping state) and starts
   /// again: the next frame that can initialise opens a new map whose first keyframe
   /// sits at T_W_C in the same odometry frame (the last known pose). Keyframe and
   /// landmark ids start again at 0 (a new session). Parallel mapping finishes first.
@@ -178,11 +146,12 @@ class Tracker {
   /// relocalisation the caller simulates); the next keyframe's odometry edge
   /// is weakened as after a real loss.
   void markLost() { lost_since_keyframe_ = true; }
-  /// Called on every window takeWindowIfDue hands out (test hooks).
-  void setWindowHook(std::function<void(Submap*)> hook) { window_hook_ = std::move(hook); }
   /// Latest VO motion for the distiller (valid after two consecutive tracked
-  /// frames), with the tracking health of the last window takeWindowIfDue handed out.
+  /// frames; its health is the window cut's, window_cut.h).
   distill::MotionHint motionHint() const;
+  /// Tracking health of the frames since the previous call (the window cut
+  /// takes it with each window).
+  distill::TrackingHealth takeWindowHealth();
   /// Tracking health since the start (all frames fed).
   const distill::TrackingHealth& totalHealth() const { return total_health_; }
 
@@ -201,11 +170,8 @@ class Tracker {
   Expected<PoseEstimate> refineFromPrior(const Correspondences& c, const std::vector<int>& ids,
                                          const SE3& T_C_W_pred) const;
   void runLocalMapping(TrackResult* r, const std::vector<float>& scales);
-  /// Parallel mapping: applies a finished BA (if any), then starts the next one
-  /// when keyframes wait and the mapper is free.
+  /// Parallel mapping: a finished BA enters the map; the motion model follows it.
   void pollMapping();
-  void scheduleBa();
-  void applyFinishedBa(const LocalBaJob& job);
 
   TrackerParams params_;
   PinholeIntrinsics K_;
@@ -223,29 +189,11 @@ class Tracker {
   SE3 T_W_C_init_;                          ///< first keyframe's pose of a new map
   bool have_velocity_ = false;
   int reference_tracked_ = 0;
-  LocalMapper mapper_;
+  MappingStage mapping_;
   double last_stamp_ = 0, prev_stamp_ = 0;
-  // Window hand-over state.
-  SubmapHeader window_header_;
-  std::size_t window_next_kf_ = 0;
-  double window_last_t_ = 0;
-  bool window_started_ = false;
-  std::function<void(Submap*)> window_hook_;
   void noteHealth(const TrackResult& r);
-  distill::TrackingHealth health_;         ///< frames since the last window hand-over
-  distill::TrackingHealth window_health_;  ///< of the last window handed out
+  distill::TrackingHealth health_;         ///< frames since the last takeWindowHealth()
   distill::TrackingHealth total_health_;
-  // Parallel mapping (all touched by the caller's thread only, except the
-  // finished-job mailbox, which the mapper thread fills under done_mu_).
-  MappingStageStats mapping_stats_;
-  std::function<void()> before_solve_;
-  std::vector<float> ba_scales_;      ///< pyramid scales for the BA jobs
-  std::size_t mapped_keyframes_ = 0;  ///< keyframes [0, n) adjusted or skipped
-  int waiting_keyframes_ = 0;         ///< inserted, no BA job cut yet
-  bool ba_in_flight_ = false;         ///< a job was pushed and not yet applied
-  std::mutex done_mu_;
-  std::optional<LocalBaJob> done_;    ///< solved, waiting to be applied
-  std::unique_ptr<agent::StageWorker<LocalBaJob>> ba_worker_;  ///< last: joined first
 };
 
 }  // namespace hermes

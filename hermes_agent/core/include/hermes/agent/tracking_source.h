@@ -1,8 +1,8 @@
-// The two stand-ins for the tracker in the window step (window_step.h needs
-// only takeWindowIfDue(stamp) and motionHint()) when tracking is recorded or
-// replayed (tracking_log.h):
-//  * WindowTap wraps the live tracker and keeps a copy of the window it hands
-//    out, for the recording;
+// The two stand-ins for the live window cut in the window step (window_step.h
+// needs only takeWindowIfDue(stamp) and motionHint()) when tracking is recorded
+// or replayed (tracking_log.h):
+//  * WindowTap wraps the live window cut and keeps a copy of the window it
+//    hands out, for the recording;
 //  * ReplayTracker hands out the recorded windows and motion hints, one
 //    recorded step (frame or end-of-sequence flush) at a time.
 #pragma once
@@ -11,25 +11,25 @@
 #include <optional>
 #include <utility>
 
-#include "hermes/agent/tracker.h"
 #include "hermes/agent/tracking_log.h"
+#include "hermes/agent/window_cut.h"
 
 namespace hermes::agent {
 
 class WindowTap {
  public:
-  explicit WindowTap(Tracker& tracker) : tracker_(tracker) {}
+  explicit WindowTap(WindowCut& cut) : cut_(cut) {}
   std::optional<Submap> takeWindowIfDue(double t) {
-    std::optional<Submap> window = tracker_.takeWindowIfDue(t);
+    std::optional<Submap> window = cut_.takeWindowIfDue(t);
     if (window) taken_ = *window;
     return window;
   }
-  distill::MotionHint motionHint() const { return tracker_.motionHint(); }
+  distill::MotionHint motionHint() const { return cut_.motionHint(); }
   /// The window handed out since construction (nullopt if none).
   std::optional<Submap>& taken() { return taken_; }
 
  private:
-  Tracker& tracker_;
+  WindowCut& cut_;
   std::optional<Submap> taken_;
 };
 

@@ -1,17 +1,16 @@
-// The agent's window step: every window period the tracker hands over the map
-// since the previous window as a Submap (Tracker::takeWindowIfDue, provided by
-// local mapping), which is distilled under the uplink budget and encoded.
-// Compiled against whatever tracker is present: while the tracker has no
-// takeWindowIfDue()/motionHint() the step does nothing (no fake windows).
+// The agent's window step: every window period the window source hands over the
+// map since the previous window as a Submap, which is distilled under the uplink
+// budget and encoded. A window source has takeWindowIfDue(stamp) and
+// motionHint(): the live window cut (window_cut.h), or the stand-ins that record
+// or replay tracking (tracking_source.h).
 #pragma once
 
 #include <chrono>
-#include <functional>
-#include <vector>
 #include <cstdint>
+#include <functional>
 #include <optional>
-#include <type_traits>
 #include <utility>
+#include <vector>
 
 #include "hermes/agent/bandwidth_monitor.h"
 #include "hermes/agent/submap_window.h"
@@ -44,32 +43,6 @@ struct WindowCounters {
   std::optional<Submap> held;
   std::int64_t extended_keyframes = 0;  ///< keyframe extensions sent
 };
-
-template <typename T, typename = void>
-struct TrackerHasWindows : std::false_type {};
-template <typename T>
-struct TrackerHasWindows<T, std::void_t<decltype(std::declval<T&>().takeWindowIfDue(0.0)),
-                                        decltype(std::declval<const T&>().motionHint())>>
-    : std::true_type {};
-
-template <typename T, typename = void>
-struct TrackerHasSetAgent : std::false_type {};
-template <typename T>
-struct TrackerHasSetAgent<T, std::void_t<decltype(std::declval<T&>().setAgent(
-                                 std::declval<const Uuid&>(), std::uint32_t{0}))>>
-    : std::true_type {};
-
-/// Writes the agent identity into the tracker's window headers (if it has windows).
-template <typename TrackerT>
-void setWindowIdentity(TrackerT& tracker, const Uuid& agent, std::uint32_t session) {
-  if constexpr (TrackerHasSetAgent<TrackerT>::value) {
-    tracker.setAgent(agent, session);
-  } else {
-    (void)tracker;
-    (void)agent;
-    (void)session;
-  }
-}
 
 /// Where a window step's encoded submap goes. Without a sink (no uplink) the
 /// submap is only counted, the link is unknown: the budget comes from the
@@ -145,68 +118,54 @@ inline void distilAndSubmit(Submap window, int periods, const distill::MotionHin
   counters->bytes += size;
 }
 
-template <typename TrackerT>
-void retryCarriedWindow(TrackerT& tracker, distill::Distiller& distiller,
+template <typename Source>
+void retryCarriedWindow(Source& source, distill::Distiller& distiller,
                         const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
                         TimingStats* timings, const WindowSink* sink = nullptr);
 
-/// One window step at time `stamp` [s]: the tracker's due window, merged with
+/// One window step at time `stamp` [s]: the source's due window, merged with
 /// the carried one, distilled and submitted. Without a new window (no new
 /// keyframes: the robot stands still) a carried one is retried once a period.
-template <typename TrackerT>
-void runWindowStep(TrackerT& tracker, distill::Distiller& distiller,
+template <typename Source>
+void runWindowStep(Source& source, distill::Distiller& distiller,
                    const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
                    TimingStats* timings, const WindowSink* sink = nullptr) {
-  if constexpr (TrackerHasWindows<TrackerT>::value) {
-    std::optional<Submap> window = tracker.takeWindowIfDue(stamp);
-    if (!window) {
-      if (counters->carry && stamp - counters->carry_stamp >= distiller.params().window_s)
-        retryCarriedWindow(tracker, distiller, monitor, stamp, counters, timings, sink);
-      return;
-    }
-    ++counters->windows;
-    int periods = 1;
-    if (counters->carry) {
-      auto merged = mergeWindows(std::move(*counters->carry), *window);
-      counters->carry.reset();
-      if (merged.ok()) {
-        *window = std::move(*merged);
-        ++counters->carried;
-        periods += counters->carry_periods;
-      } else {
-        ++counters->failed;  // camera changed: the carried window cannot join this one
-      }
-      counters->carry_dropped_keyframes +=
-          static_cast<std::int64_t>(keepNewestKeyframes(&*window, kMaxCarryKeyframes));
-    }
-    distilAndSubmit(std::move(*window), periods, tracker.motionHint(), distiller, monitor, stamp,
-                    counters, timings, sink);
-  } else {
-    // TODO(mapping): Tracker::takeWindowIfDue(double) -> std::optional<Submap> and
-    // Tracker::motionHint() are not on main yet; until they are, no window exists.
-    (void)tracker;
-    (void)distiller;
-    (void)monitor;
-    (void)stamp;
-    (void)counters;
-    (void)timings;
-    (void)sink;
+  std::optional<Submap> window = source.takeWindowIfDue(stamp);
+  if (!window) {
+    if (counters->carry && stamp - counters->carry_stamp >= distiller.params().window_s)
+      retryCarriedWindow(source, distiller, monitor, stamp, counters, timings, sink);
+    return;
   }
+  ++counters->windows;
+  int periods = 1;
+  if (counters->carry) {
+    auto merged = mergeWindows(std::move(*counters->carry), *window);
+    counters->carry.reset();
+    if (merged.ok()) {
+      *window = std::move(*merged);
+      ++counters->carried;
+      periods += counters->carry_periods;
+    } else {
+      ++counters->failed;  // camera changed: the carried window cannot join this one
+    }
+    counters->carry_dropped_keyframes +=
+        static_cast<std::int64_t>(keepNewestKeyframes(&*window, kMaxCarryKeyframes));
+  }
+  distilAndSubmit(std::move(*window), periods, source.motionHint(), distiller, monitor, stamp,
+                  counters, timings, sink);
 }
 
 /// When no new window comes (the sequence ended, the robot stands still), the
 /// carried window is tried again: it now stands for one more period of the link.
-template <typename TrackerT>
-void retryCarriedWindow(TrackerT& tracker, distill::Distiller& distiller,
+template <typename Source>
+void retryCarriedWindow(Source& source, distill::Distiller& distiller,
                         const BandwidthMonitor& monitor, double stamp, WindowCounters* counters,
                         TimingStats* timings, const WindowSink* sink) {
-  if constexpr (TrackerHasWindows<TrackerT>::value) {
-    if (!counters->carry) return;
-    Submap window = std::move(*counters->carry);
-    counters->carry.reset();
-    distilAndSubmit(std::move(window), counters->carry_periods + 1, tracker.motionHint(),
-                    distiller, monitor, stamp, counters, timings, sink);
-  }
+  if (!counters->carry) return;
+  Submap window = std::move(*counters->carry);
+  counters->carry.reset();
+  distilAndSubmit(std::move(window), counters->carry_periods + 1, source.motionHint(),
+                  distiller, monitor, stamp, counters, timings, sink);
 }
 
 }  // namespace hermes::agent
