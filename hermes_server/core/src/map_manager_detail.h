@@ -1,5 +1,5 @@
-// Helpers shared by the map manager's source files (map_manager.cc: storing,
-// PCM, anchoring, pose graph; map_manager_loops.cc: loop detection).
+// Helpers shared by the map manager's source files (map_manager.cc: the merge
+// pipeline; one file per stage: _store, _loops, _anchoring, _optimize, _io).
 #pragma once
 
 #include <chrono>

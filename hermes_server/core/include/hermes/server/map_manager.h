@@ -6,6 +6,13 @@
 // trajectory (robot, session): the world trajectory is chosen once, every
 // other one (also a later session of the world robot) needs min_world_loops
 // accepted loops to anchored trajectories (bookkeeper.h: re-localisation).
+//
+// One merge (merge()) runs the stages in order, each in its own source file:
+// store (map_manager_store.cc: keyframes, landmarks, odometry, keyframe
+// extensions), detect_loops (map_manager_loops.cc: place and spatial
+// candidates, closure budget, 17-point verification), pcm and anchoring
+// (map_manager_anchoring.cc), optimize (map_manager_optimize.cc: incremental
+// and full pose-graph solves); checkpoints in map_manager_io.cc.
 #pragma once
 
 #include <deque>
