@@ -1,5 +1,6 @@
-# ctest "core_sources_are_ros_free" (./hermes test builds only the ROS tree):
-# no source of a ROS-free library includes a ROS header. Run as
+# ctest "core_sources_are_ros_free" (besides building the ROS-free tree on its
+# own, ./hermes test checks the sources): no source of a ROS-free library
+# includes a ROS header. Run as
 #   cmake -DROOT=<source dir> -P cmake/CheckRosFree.cmake
 set(dirs src hermes_distill hermes_agent/core hermes_server/core hermes_transport hermes_system)
 set(ros_headers "ros|nodelet|pluginlib|sensor_msgs|std_msgs|geometry_msgs|nav_msgs|visualization_msgs|tf|tf2|tf2_ros|rosbag|image_transport|cv_bridge|message_filters|hermes_msgs")

@@ -1,15 +1,20 @@
-# hermes_module(NAME <lib> DIR <dir> [DEPS <targets...>])
+# hermes_module(NAME <lib> DIR <dir> [DEPS <targets...>] [TEST_LABEL unit|integration])
 # Builds a shared library from <dir>/src/*.cc (public headers in <dir>/include),
 # one executable per <dir>/tools/*.cc (named hermes_<stem>), and one GoogleTest
 # executable per <dir>/test/test_*.cc (linked with <dir>/test/support/*.cc if any).
-# Tests get HERMES_SOURCE_DIR and HERMES_BIN_DIR (the tools' folder); a test whose
-# source mentions HERMES_BIN_DIR depends on the module's tools.
+# Tests get HERMES_SOURCE_DIR; a test whose source mentions HERMES_BIN_DIR (the
+# tools' folder) gets it and depends on the module's tools (the other tests
+# compile alike in every build tree, so a compiler cache serves both). Tests are
+# labelled TEST_LABEL: unit (default) or integration (whole-system runs).
 # A tool's usage text is tools/help/hermes_<stem>.txt (HermesHelp.cmake).
 # Sources are globbed, so adding a file needs no CMake edit (re-run cmake).
 include(${CMAKE_CURRENT_LIST_DIR}/HermesHelp.cmake)
 
 function(hermes_module)
-  cmake_parse_arguments(M "" "NAME;DIR" "DEPS" ${ARGN})
+  cmake_parse_arguments(M "" "NAME;DIR;TEST_LABEL" "DEPS" ${ARGN})
+  if(NOT M_TEST_LABEL)
+    set(M_TEST_LABEL unit)
+  endif()
   file(GLOB_RECURSE srcs CONFIGURE_DEPENDS ${M_DIR}/src/*.cc)
   if(NOT srcs)  # a module that has no sources yet still yields a linkable library
     set(srcs ${CMAKE_CURRENT_BINARY_DIR}/${M_NAME}_empty.cc)
@@ -62,16 +67,18 @@ function(hermes_module)
       target_compile_definitions(${exe} PRIVATE
         HERMES_SOURCE_DIR="${CMAKE_SOURCE_DIR}"
         HERMES_DATA_DIR="${CMAKE_SOURCE_DIR}/data"
-      HERMES_TRAJECTORY_DIR="${CMAKE_SOURCE_DIR}/config/trajectories"
-        HERMES_BIN_DIR="${CMAKE_BINARY_DIR}/bin")
+        HERMES_TRAJECTORY_DIR="${CMAKE_SOURCE_DIR}/config/trajectories")
       # A test that runs the module's tools (it names HERMES_BIN_DIR) needs them built.
       file(READ ${t} body)
-      if(tool_targets AND body MATCHES "HERMES_BIN_DIR")
-        add_dependencies(${exe} ${tool_targets})
+      if(body MATCHES "HERMES_BIN_DIR")
+        target_compile_definitions(${exe} PRIVATE HERMES_BIN_DIR="${CMAKE_BINARY_DIR}/bin")
+        if(tool_targets)
+          add_dependencies(${exe} ${tool_targets})
+        endif()
       endif()
       set_target_properties(${exe} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/test_bin)
       gtest_discover_tests(${exe} TEST_PREFIX "${M_NAME}." DISCOVERY_TIMEOUT 60
-        PROPERTIES LABELS "unit")
+        PROPERTIES LABELS "${M_TEST_LABEL}")
     endforeach()
   endif()
 endfunction()
