@@ -6,12 +6,15 @@
 # look: motion blur, photon noise, dark regions, aliasing copies, moving objects;
 # cached in data_cache/demo after the first run), runs the three agents and the edge
 # server in one process over ONE emulated 10 Mbit/s link they all share, and
-# prints the report (merged agents, ATE per agent and merged, bytes, kB/s, loops)
-# with the paths of the plots.
+# prints the report: first what merging gave (robots placed in one map, the map,
+# loops between robots, bytes sent, each robot's odometry ATE beside its ATE in
+# the merged map) and how to read it, then the details and the paths of the plots.
+# Results go to ./results/demo of the working directory (--out), the renders to
+# the checkout's data_cache/demo (shared by every run).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 HERMES="$ROOT/hermes"
-OUT="$ROOT/results/demo"
+OUT="results/demo"   # of the working directory, as ./hermes run --out
 CACHE="$ROOT/data_cache/demo"
 START=20
 DURATION=30
@@ -26,7 +29,8 @@ usage: ./hermes demo [--out DIR] [--start S] [--duration S] [--rate HZ] [--bandw
   realistic renders (hermes_sim's default), cached in
   data_cache/demo/s<start>_d<duration>_r<rate>_realistic after the first run), runs
   3 agents + the server over one shared emulated link (default 10 Mbit/s) on a
-  simulated clock, prints the report and writes plots under OUT (default results/demo).
+  simulated clock, prints the report and writes metrics, trajectories and plots under OUT
+  (default results/demo in the working directory).
   --plain: the plain look instead (every realism effect off; cached in .../s<start>_d<duration>_r<rate>).
   --fresh: render again.  --json: print the metrics JSON instead of the report.
 H
@@ -55,7 +59,7 @@ GT_DIR="$ROOT/config/trajectories"   # shipped EuRoC ground truth (see its READM
 T0=$SECONDS
 echo "[demo] set-up and build (ROS-free tools; first time: several minutes)"
 "$HERMES" build --no-ros --target hermes_sim --target hermes_run >/dev/null   # installs what is missing first
-BIN="$ROOT/build-noros/bin"
+BIN="${HERMES_BUILD_NOROS_DIR:-$ROOT/build-noros}/bin"   # the tree ./hermes build --no-ros builds
 mkdir -p "$OUT" "$CACHE"
 
 for v in "$START" "$DURATION" "$RATE" "$BANDWIDTH"; do
@@ -98,9 +102,18 @@ cat <<REPORT
 
 ================ Hermes demo report ================
 $REPORT
+
+How to read it: "odometry" is each robot's own tracking against the ground truth, aligned
+on its own, in its own frame; it says nothing about where the robot is relative to the
+others. "merged" is the robot's place in the one map the server built of all of them
+(which no robot has alone), under one alignment for all robots: it counts the robot's own
+error and how well it sits relative to the others, so it can lie above its odometry (the
+others' error spread over it) or below (loops that fixed its drift). "sent" is everything
+the robots put on the one shared link, against what streaming their cameras would take.
+
 rendered data : $CACHE/$KEY  (3 robots, EuRoC layout, one shared hall, ${LOOK} look)
 metrics       : $OUT/metrics.json
-trajectories  : $OUT/trajectories/<robot>_{raw,merged,gt}.tum
+trajectories  : $OUT/trajectories/<robot>_{raw,merged,global,gt}.tum  (odometry, merged map, own world pose, ground truth)
 plots         : $OUT/plots/trajectories_top.png
                 $OUT/plots/bandwidth.png
                 $OUT/plots/ate_over_time.png

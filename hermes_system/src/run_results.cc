@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <limits>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -175,6 +177,54 @@ void globalPoseAccuracy(const OfflineRun& run, const eval::Alignment& alignment,
   }
 }
 
+/// The one map: robots placed, its size, the paths flown in it, loops between robots.
+MapSummary summarizeMap(const OfflineRun& run, std::int64_t agents_merged) {
+  MapSummary s;
+  const server::GlobalMap& map = run.server().map();
+  s.robots = agents_merged;
+  s.keyframes = static_cast<std::int64_t>(map.keyframeCount());
+  s.landmarks = static_cast<std::int64_t>(map.landmarkCount());
+  for (const server::LoopEdge& l : map.loops)
+    if (l.accepted && l.a.agent != l.b.agent) ++s.loops_inter_robot;
+  std::vector<Vec3> positions;
+  for (const OfflineAgent& a : run.agents()) {
+    const Trajectory t = mergedTrajectory(run, a);
+    if (t.empty()) continue;
+    double path = 0;
+    for (std::size_t i = 0; i < t.size(); ++i) {
+      positions.push_back(t[i].T_W_B.translation());
+      if (i > 0) path += (positions.back() - t[i - 1].T_W_B.translation()).norm();
+    }
+    s.robot_path_m[a.name] = path;
+    s.path_m += path;
+  }
+  if (positions.empty()) return s;
+  // The box along the positions' principal axes, so that its sides do not depend on how
+  // the world frame happens to be turned.
+  Vec3 mean = Vec3::Zero();
+  for (const Vec3& p : positions) mean += p;
+  mean /= double(positions.size());
+  Mat3 cov = Mat3::Zero();
+  for (const Vec3& p : positions) cov += (p - mean) * (p - mean).transpose();
+  const Mat3 axes = Eigen::SelfAdjointEigenSolver<Mat3>(cov).eigenvectors();
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const Vec3& p : positions) {
+    const Vec3 q = axes.transpose() * (p - mean);
+    lo = lo.cwiseMin(q);
+    hi = hi.cwiseMax(q);
+  }
+  s.extent_m = hi - lo;
+  std::sort(s.extent_m.data(), s.extent_m.data() + 3, std::greater<double>());
+  return s;
+}
+
+/// Uncompressed bytes of one camera frame of `a`: a grey stereo pair, or RGB + 16-bit depth.
+std::int64_t cameraFrameBytes(const OfflineAgent& a) {
+  const DatasetInfo& info = a.dataset->info();
+  const std::int64_t pixels = std::int64_t(info.K.width) * info.K.height;
+  return isStereo(info.kind) ? 2 * pixels : pixels * (3 + 2);
+}
+
 }  // namespace
 
 RunResults evaluateRun(const OfflineRun& run) {
@@ -246,6 +296,8 @@ RunResults evaluateRun(const OfflineRun& run) {
     }
   }
   loopAccuracy(run, &res);
+  res.map = summarizeMap(run, m.agents_merged.value_or(0));
+  for (const OfflineAgent& a : run.agents()) res.camera_bytes += std::int64_t(a.next) * cameraFrameBytes(a);
   res.durability = summarizeDurability(run);
   res.relay = summarizeRelay(run);
   return res;
@@ -265,6 +317,15 @@ nlohmann::json resultsJson(const RunResults& res) {
                           {"precision", 1.0 - double(l.wrong) / double(l.loops)}};
   }
   j["loops_per_pair"] = res.loops_per_pair;
+  const MapSummary& g = res.map;
+  j["global_map"] = {{"robots", g.robots},
+                     {"keyframes", g.keyframes},
+                     {"landmarks", g.landmarks},
+                     {"loops_inter_robot", g.loops_inter_robot},
+                     {"path_m", g.path_m},
+                     {"robot_path_m", g.robot_path_m},
+                     {"extent_m", {g.extent_m.x(), g.extent_m.y(), g.extent_m.z()}}};
+  j["camera_bytes_total"] = res.camera_bytes;
   if (!res.warnings.empty()) j["warnings"] = res.warnings;
   if (res.durability) j.update(durabilityJson(*res.durability));
   if (res.relay) j["relay"] = relayJson(*res.relay);
@@ -449,14 +510,16 @@ Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAt
 
 std::string formatReport(const OfflineRun& run, const RunResults& res) {
   const RunMetrics& m = res.metrics;
+  const MapSummary& g = res.map;
   std::ostringstream o;
-  char buf[256];
-  auto cm = [](const std::optional<double>& v) { return v ? *v * 100.0 : std::nan(""); };
-  std::snprintf(buf, sizeof buf, "agents merged %lld/%zu   merged ATE %.2f cm   loops %lld accepted, %lld rejected\n",
-                static_cast<long long>(m.agents_merged.value_or(0)), run.agents().size(),
-                cm(m.ate_rmse_m), static_cast<long long>(m.loops_accepted.value_or(0)),
-                static_cast<long long>(m.loops_rejected.value_or(0)));
-  o << buf;
+  char buf[320];
+  auto ll = [](std::int64_t v) { return static_cast<long long>(v); };
+  auto cell = [](const std::optional<double>& v) {  // [m] -> "1.23" [cm], "-" when absent
+    char c[32];
+    if (!v) return std::string("-");
+    std::snprintf(c, sizeof c, "%.2f", *v * 100.0);
+    return std::string(c);
+  };
   std::string link;
   if (run.network())
     link = "scenario " + run.params().link.scenario;
@@ -466,38 +529,72 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
     link = fmtNumber(run.params().link.bandwidth_mbitps) + " Mbit/s shared";
   else
     link = "trace " + run.params().link.trace;
-  std::snprintf(buf, sizeof buf, "bytes %.1f kB   uplink mean %.1f kB/s   peak %.1f kB/s   link %s\n",
-                double(m.bytes_total.value_or(0)) / 1000.0, m.kBps_mean.value_or(0),
-                m.kBps_peak.value_or(0), link.c_str());
+
+  // What merging gave first: one map holding every robot, which no robot has alone.
+  const std::size_t robots = run.agents().size();
+  std::snprintf(buf, sizeof buf, "one map: %lld of %zu robots placed in one world frame%s\n", ll(g.robots), robots,
+                robots > 1 ? " (alone, no robot knows where the others are)" : "");
+  o << buf;
+  std::snprintf(buf, sizeof buf,
+                "  map       %lld keyframes, %lld landmarks; %.1f m flown in it, within %.1f x %.1f x %.1f m\n",
+                ll(g.keyframes), ll(g.landmarks), g.path_m, g.extent_m.x(), g.extent_m.y(), g.extent_m.z());
+  o << buf;
+  std::snprintf(buf, sizeof buf, "  loops     %lld between robots (%lld accepted in all, %lld rejected)\n",
+                ll(g.loops_inter_robot), ll(m.loops_accepted.value_or(0)), ll(m.loops_rejected.value_or(0)));
+  o << buf;
+  const double sent_mb = double(m.bytes_total.value_or(0)) / 1e6;
+  std::snprintf(buf, sizeof buf, "  sent      %.1f MB (link %s)", sent_mb, link.c_str());
+  o << buf;
+  if (res.camera_bytes > 0) {
+    std::snprintf(buf, sizeof buf, ": %.2f %% of the %.0f MB of images the cameras took (uncompressed)",
+                  100.0 * sent_mb * 1e6 / double(res.camera_bytes), double(res.camera_bytes) / 1e6);
+    o << buf;
+  }
+  o << '\n';
+  std::snprintf(buf, sizeof buf, "  %-14s %20s   %24s   %9s\n", "ATE [cm]", "odometry (own frame)",
+                "merged (one map for all)", "flown [m]");
   o << buf;
   for (const AgentMetrics& a : m.per_agent) {
-    std::snprintf(buf, sizeof buf,
-                  "  %-14s odometry ATE %6.2f cm  merged ATE %6.2f cm  lost %5.1f %%  submaps sent %lld "
-                  "applied %lld deferred %lld  %.1f kB\n",
-                  a.agent.c_str(), cm(a.raw_ate_rmse_m), cm(a.merged_ate_rmse_m),
-                  100.0 * a.lost_rate.value_or(0), static_cast<long long>(a.submaps_sent.value_or(0)),
-                  static_cast<long long>(a.submaps_applied.value_or(0)),
-                  static_cast<long long>(a.submaps_deferred.value_or(0)),
+    const auto path = g.robot_path_m.find(a.agent);
+    std::string flown = "-";
+    if (path != g.robot_path_m.end()) {
+      std::snprintf(buf, sizeof buf, "%.1f", path->second);
+      flown = buf;
+    }
+    std::snprintf(buf, sizeof buf, "  %-14s %20s   %24s   %9s\n", a.agent.c_str(), cell(a.raw_ate_rmse_m).c_str(),
+                  cell(a.merged_ate_rmse_m).c_str(), flown.c_str());
+    o << buf;
+  }
+  std::snprintf(buf, sizeof buf, "  %-14s %20s   %24s\n", "all robots", "", cell(m.ate_rmse_m).c_str());
+  o << buf;
+
+  // The details.
+  std::snprintf(buf, sizeof buf, "uplink: %.1f kB in all, mean %.1f kB/s, peak %.1f kB/s\n",
+                double(m.bytes_total.value_or(0)) / 1000.0, m.kBps_mean.value_or(0), m.kBps_peak.value_or(0));
+  o << buf;
+  for (const AgentMetrics& a : m.per_agent) {
+    std::snprintf(buf, sizeof buf, "  %-14s lost %5.1f %%  submaps sent %lld applied %lld deferred %lld  %.1f kB\n",
+                  a.agent.c_str(), 100.0 * a.lost_rate.value_or(0), ll(a.submaps_sent.value_or(0)),
+                  ll(a.submaps_applied.value_or(0)), ll(a.submaps_deferred.value_or(0)),
                   double(a.bytes.value_or(0)) / 1000.0);
     o << buf;
     if (a.global_pose_final_m) {  // what the robot itself knew of its place in the world
       std::snprintf(buf, sizeof buf,
-                    "  %-14s own global pose: %.2f cm at its last frame, %.2f cm RMSE over time, %lld update(s)\n",
-                    "", cm(a.global_pose_final_m), cm(a.global_pose_rmse_m),
-                    static_cast<long long>(a.global_pose_updates.value_or(0)));
+                    "  %-14s own global pose: %s cm at its last frame, %s cm RMSE over time, %lld update(s)\n",
+                    "", cell(a.global_pose_final_m).c_str(), cell(a.global_pose_rmse_m).c_str(),
+                    ll(a.global_pose_updates.value_or(0)));
       o << buf;
     }
     if (a.trouble_windows.value_or(0) > 0) {  // windows distilled with more keyframes / budget
       std::snprintf(buf, sizeof buf, "  %-14s in trouble: %lld window(s), %lld weak frame(s)\n", "",
-                    static_cast<long long>(*a.trouble_windows),
-                    static_cast<long long>(a.weak_frames.value_or(0)));
+                    ll(*a.trouble_windows), ll(a.weak_frames.value_or(0)));
       o << buf;
     }
   }
   if (res.loop_accuracy) {
     const LoopAccuracy& l = *res.loop_accuracy;
     std::snprintf(buf, sizeof buf,
-                  "loop accuracy vs ground truth: %zu loops (%zu inter-agent), median %.2f cm / "
+                  "loop accuracy vs ground truth: %zu loops (%zu between robots), median %.2f cm / "
                   "%.3f deg, p95 %.2f cm, %zu off by > 10 cm or 2 deg\n",
                   l.loops, l.inter_agent, l.median_trans_m * 100, l.median_rot_deg,
                   l.p95_trans_m * 100, l.wrong);

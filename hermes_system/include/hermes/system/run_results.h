@@ -38,8 +38,26 @@ struct LoopAccuracy {
   std::size_t wrong = 0;            ///< accepted loops off by > 0.1 m or > 2 deg (false loops)
 };
 
+/// What merging gave: the one map the robots were placed in (the report's lead,
+/// metrics.json "global_map").
+struct MapSummary {
+  std::int64_t robots = 0;             ///< robots placed in the map's one world frame
+  std::int64_t keyframes = 0, landmarks = 0;
+  std::int64_t loops_inter_robot = 0;  ///< accepted loops between two different robots
+  double path_m = 0;                   ///< every placed robot's keyframe path in the map, summed [m]
+  std::map<std::string, double> robot_path_m;  ///< each placed robot's keyframe path [m]
+  /// Sides of the box around every keyframe position, along their principal axes,
+  /// longest first [m].
+  Vec3 extent_m = Vec3::Zero();
+};
+
 struct RunResults {
   RunMetrics metrics;
+  MapSummary map;
+  /// Bytes of the images the robots' cameras took over the run, uncompressed (8-bit
+  /// grey stereo pairs; RGB + 16-bit depth): what streaming the cameras would send
+  /// (metrics.json "camera_bytes_total").
+  std::int64_t camera_bytes = 0;
   std::optional<LoopAccuracy> loop_accuracy;
   std::map<std::string, std::size_t> loops_per_pair;  ///< "a-b" -> accepted loops
   std::vector<std::string> warnings;                  ///< e.g. an agent that could not be evaluated
@@ -50,7 +68,8 @@ struct RunResults {
 /// Evaluates the finished run and fills the metrics (no files).
 RunResults evaluateRun(const OfflineRun& run);
 
-/// metrics.json: the DESIGN §7 metrics plus "loop_accuracy", "loops_per_pair", "warnings",
+/// metrics.json: the DESIGN §7 metrics plus "global_map", "camera_bytes_total",
+/// "loop_accuracy", "loops_per_pair", "warnings",
 /// and with checkpoints "server_durability" and "server_restarts" (durability_report.h).
 nlohmann::json resultsJson(const RunResults& results);
 
@@ -65,7 +84,11 @@ Status writeRunResults(const OfflineRun& run, const RunResults& results, const s
 Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAttempt>& attempts,
                          const std::string& path);
 
-/// A short human-readable report (merged agents, ATE, bytes, kB/s, loops).
+/// A short human-readable report. It leads with what merging gave: robots placed in
+/// one map, the map (keyframes, landmarks, metres flown, extent), loops between robots,
+/// bytes sent against the cameras' images, and per robot its odometry ATE (own frame)
+/// beside its merged ATE (the one map); then the details (lost, submaps, kB, own world
+/// pose, loop accuracy).
 std::string formatReport(const OfflineRun& run, const RunResults& results);
 
 }  // namespace hermes::system
