@@ -2,7 +2,7 @@
 // built from real EuRoC ground truth (MH_01_easy, V1_01_easy) by the synthetic
 // window generator. Prints JSON (stdout, and --json FILE).
 //
-//   hermes_bench_distill [--json FILE] [--windows N] [--data DIR] [--seed S]
+// Usage: tools/help/hermes_bench_distill.txt (`hermes_bench_distill --help`).
 //
 // Per strategy: selection time (Eq. 14 instance with K = 60 and a landmark byte
 // budget of 40 % of the unconstrained selection), full Distiller time with the
@@ -27,6 +27,7 @@
 #include "hermes/distill/distiller.h"
 #include "hermes/distill/selectors.h"
 #include "hermes/distill/synthetic_window.h"
+#include "hermes_help/hermes_bench_distill.h"  // tools/help/hermes_bench_distill.txt
 
 using namespace hermes;
 using namespace hermes::distill;
@@ -72,8 +73,7 @@ int main(int argc, char** argv) {
     else if (a == "--seed") seed = std::strtoull(next().c_str(), nullptr, 10);
     else if (a == "--set") overrides.push_back(next());
     else if (a == "--help" || a == "-h") {
-      std::printf("hermes_bench_distill [--json FILE] [--windows N] [--data DIR] [--seed S]\n"
-                  "                     [--set distill.KEY=VALUE ...]  (distill.strategy is swept)\n");
+      std::fputs(hermes_help::kText, stdout);
       return 0;
     } else {
       std::fprintf(stderr, "hermes_bench_distill: unknown argument '%s'\n", a.c_str());

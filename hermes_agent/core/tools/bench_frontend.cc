@@ -11,9 +11,7 @@
 // --ablation instead runs the keyframe-policy ablation (paper §IV-A): each
 //   rendered sequence tracked with keyframe.policy entropy and covisibility;
 //   keyframes, ATE, lost rate per run.
-// Usage: hermes_bench_frontend [--data DIR/mav0] [--frames N] [--json FILE]
-//                              [--cache DIR] [--no-render]
-//        hermes_bench_frontend --ablation [--sequence STEM,START,DURATION,POOR_FRACTION ...]
+// Usage: tools/help/hermes_bench_frontend.txt (`hermes_bench_frontend --help`).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -38,6 +36,7 @@
 #include "hermes/agent/pose_estimation.h"
 #include "hermes/agent/stereo_matcher.h"
 #include "hermes/agent/tracker.h"
+#include "hermes_help/hermes_bench_frontend.h"  // tools/help/hermes_bench_frontend.txt
 #include "rendered_runs.h"
 
 using namespace hermes;
@@ -273,28 +272,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
-      std::cout
-          << "hermes_bench_frontend [--data DIR/mav0] [--frames N] [--json FILE]\n"
-             "                      [--cache DIR] [--no-render] [--ablation]\n"
-             "Times ORB extraction (ours vs cv::ORB), CLAHE entropy, stereo matching, "
-             "PnP+refinement and Tracker::feed on EuRoC images, and local bundle adjustment "
-             "per keyframe (time, window size) on them and on a rendered moving sequence "
-             "(section local_ba); prints JSON.\n"
-             "--cache DIR: where hermes_sim renders go, once each (default "
-             "/tmp/hermes_bench_frontend; one folder per trajectory/slice/seed/poor fraction)\n"
-             "--no-render: skip the rendered sequence (real images only)\n"
-             "--ablation: instead, the keyframe-policy ablation: rendered MH_01 0-60 s and "
-             "V1_01 0-40 s (hermes_sim --poor-fraction 0.25, 0.7, 0.85) tracked with "
-             "keyframe.policy entropy and covisibility; keyframes, ATE, lost rate per run "
-             "(first run renders about 2600 stereo pairs: ~10 min)\n"
-             "--sequence STEM,START,DURATION,POOR_FRACTION: ablate this slice of "
-             "config/trajectories/STEM.txt instead (repeatable), e.g. V1_01_easy,0,40,0.85\n"
-             "--realistic (the default) / --plain: the ablation's renders with every realism "
-             "effect (render.realistic=true: blur, exposure, noise, dark regions, aliasing, moving "
-             "objects) or none (the plain look); cached apart\n"
-             "--entropy T_L,T_H,K: the entropy rule's thresholds and FIFO length for the "
-             "ablation (default keyframe.ratio_low/high, entropy_window); each entropy run "
-             "reports the spread of r = H / mean(FIFO) over its frames (entropy_ratio)\n";
+      std::cout << hermes_help::kText;
       return 0;
     } else if (a == "--cache" && i + 1 < argc) {
       cache = argv[++i];

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hermes/agent/monitor_replay.h"
+#include "hermes_help/hermes_bench_monitor.h"  // tools/help/hermes_bench_monitor.txt
 
 namespace fs = std::filesystem;
 using namespace hermes;
@@ -19,14 +20,7 @@ using namespace hermes::agent;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_bench_monitor [--trace CSV] [--duration S] [--out DIR] [--json FILE]\n"
-    "  --trace CSV     link trace time_s,rate_mbitps,latency_ms,loss (default: 30 -> 10 -> 2\n"
-    "                  -> 0 (30 s outage) -> 20 Mbit/s, changes at 60/120/180/210 s)\n"
-    "  --duration S    simulated seconds (default 270, or the trace's last change + 60)\n"
-    "  --out DIR       writes monitor_curve.csv and monitor_curve.png (default\n"
-    "                  results/bench_monitor)\n"
-    "  --json FILE     also write the JSON result there\n";
+const char* const kUsage = hermes_help::kText;
 
 const char* kIssueTrace =
     "time_s,rate_mbitps,latency_ms,loss\n0,30,5,0\n60,10,5,0\n120,2,5,0\n180,0,5,0\n210,20,5,0\n";

@@ -11,9 +11,7 @@
 //   stage counters (BA jobs merged / skipped, windows queued / merged).
 // The agent has no uplink: windows are distilled (distill.* as configured,
 // default milp) and encoded, then only counted.
-// Usage: hermes_bench_realtime_core [--format euroc|tum] [--rate HZ] [--start S] [--seconds N]
-//                                   [--mode both|sync|parallel] [--cache DIR] [--json FILE]
-//                                   [--set key=value ...]
+// Usage: tools/help/hermes_bench_realtime_core.txt (`hermes_bench_realtime_core --help`).
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -36,6 +34,7 @@
 #include "hermes/core/render/dataset_writer.h"
 #include "hermes/core/render/rig.h"
 #include "hermes/core/render/scene.h"
+#include "hermes_help/hermes_bench_realtime_core.h"  // tools/help/hermes_bench_realtime_core.txt
 
 using namespace hermes;
 namespace fs = std::filesystem;
@@ -189,7 +188,10 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--format") format = next();
+    if (a == "--help" || a == "-h") {
+      std::cout << hermes_help::kText;
+      return 0;
+    } else if (a == "--format") format = next();
     else if (a == "--rate") rate_hz = std::stod(next());
     else if (a == "--start") start_s = std::stod(next());
     else if (a == "--seconds") seconds = std::stod(next());
@@ -198,10 +200,8 @@ int main(int argc, char** argv) {
     else if (a == "--json") json_out = next();
     else if (a == "--set") sets.push_back(next());
     else {
-      std::cerr << "usage: hermes_bench_realtime_core [--format euroc|tum] [--rate HZ] "
-                   "[--start S] [--seconds N] "
-                   "[--mode both|sync|parallel] [--cache DIR] [--json FILE] [--set key=value ...]\n";
-      return a == "--help" ? 0 : 2;
+      std::cerr << hermes_help::kText;
+      return 2;
     }
   }
   if (format != "euroc" && format != "tum") {

@@ -15,6 +15,7 @@
 
 #include "hermes/server/loop_closure.h"
 #include "hermes/server/pose_graph.h"
+#include "hermes_help/hermes_bench_loops.h"  // tools/help/hermes_bench_loops.txt
 
 namespace {
 
@@ -255,7 +256,7 @@ int main(int argc, char** argv) {
     } else if (a == "--reps" && i + 1 < argc) {
       reps = std::max(1, std::atoi(argv[++i]));
     } else if (a == "--help" || a == "-h") {
-      std::printf("usage: hermes_bench_loops [--json FILE] [--reps N]\n");
+      std::fputs(hermes_help::kText, stdout);
       return 0;
     } else {
       std::fprintf(stderr, "hermes_bench_loops: unknown argument '%s'\n", a.c_str());

@@ -6,8 +6,7 @@
 // in real time, for one thread that receives and merges (a ROS node with one
 // spinner, as before issue 17) and for ServerWorker (merging on its thread).
 //
-// Usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints 200] [--acks MS]
-//                            [--source REPO] [--data TRAJECTORY_DIR] [--set server.KEY=VALUE]
+// Usage: tools/help/hermes_bench_server.txt (`hermes_bench_server --help`).
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
@@ -25,6 +24,7 @@
 #include "hermes/server/server.h"
 #include "hermes/server/server_outputs.h"
 #include "hermes/server/server_worker.h"
+#include "hermes_help/hermes_bench_server.h"  // tools/help/hermes_bench_server.txt
 // The multi-agent fixture lives with the tests (tools cannot link the test
 // support library without a CMake change); compile it into this tool.
 #include "../test/support/multi_agent_fixture.cc"
@@ -210,7 +210,10 @@ int main(int argc, char** argv) {
   Config config;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--json" && i + 1 < argc) {
+    if (a == "--help" || a == "-h") {
+      std::cout << hermes_help::kText;
+      return 0;
+    } else if (a == "--json" && i + 1 < argc) {
       json_path = argv[++i];
     } else if (a == "--agents" && i + 1 < argc) {
       counts.clear();
@@ -231,7 +234,7 @@ int main(int argc, char** argv) {
     } else if (a == "--acks" && i + 1 < argc) {
       acks_interval_ms = std::atof(argv[++i]);
     } else {
-      std::cerr << "usage: hermes_bench_server [--json FILE] [--agents 3,10] [--keypoints N] [--acks MS] [--source REPO] [--data DIR] [--set server.KEY=VALUE]\n";
+      std::cerr << hermes_help::kText;
       return 2;
     }
   }

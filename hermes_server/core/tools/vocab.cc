@@ -1,6 +1,5 @@
 // hermes_vocab: trains the bag-of-words vocabulary from folders of images.
-//   hermes_vocab --images DIR [DIR ...] --out FILE [--k 10] [--levels 4]
-//                [--max-features 1000] [--max-images N] [--seed S] [--json FILE|-]
+// Usage: tools/help/hermes_vocab.txt (`hermes_vocab --help`).
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -14,22 +13,13 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "hermes/server/vocabulary.h"
+#include "hermes_help/hermes_vocab.h"  // tools/help/hermes_vocab.txt
 
 namespace fs = std::filesystem;
 
 namespace {
 
-const char* kUsage =
-    "usage: hermes_vocab --images DIR [DIR ...] --out FILE [options]\n"
-    "Trains a hierarchical k-medians ORB vocabulary (tf-idf) from the png/jpg images\n"
-    "found recursively in the folders (EuRoC layout works) and writes it to FILE.\n"
-    "  --k N             branching factor (default 10)\n"
-    "  --levels N        tree depth (default 4)\n"
-    "  --max-features N  ORB features per image (default 1000)\n"
-    "  --max-images N    use at most N images, evenly spread over the sorted list\n"
-    "  --seed S          seeding RNG (default 1)\n"
-    "  --json FILE       write a JSON summary to FILE ('-' = stdout)\n"
-    "  --help            this text\n";
+const char* const kUsage = hermes_help::kText;
 
 int badArgs(const std::string& why) {
   std::fprintf(stderr, "hermes_vocab: %s\n(see --help)\n", why.c_str());
