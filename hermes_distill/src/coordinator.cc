@@ -10,9 +10,8 @@ namespace hermes {
 namespace distill {
 
 double budgetBytes(const DistillParams& params, const CoordinatorInput& in) {
-  const double gain = in.probe ? 1.0 + params.probe_gain : 1.0;
   const double period = in.period_s > 0 ? in.period_s : params.window_s;
-  return params.eta * std::max(0.0, in.bandwidth_Bps) * period * gain - in.backlog_bytes;
+  return params.eta * std::max(0.0, in.bandwidth_Bps) * period - in.backlog_bytes;
 }
 
 ByteModel::ByteModel(const DistillParams& p)

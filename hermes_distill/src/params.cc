@@ -42,8 +42,6 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ_BOOL("coordinator", coordinator)
   HERMES_READ("fixed_k", fixed_k)
   HERMES_READ("eta", eta)
-  HERMES_READ("window_s", window_s)
-  HERMES_READ("probe_gain", probe_gain)
   HERMES_READ("k_max", k_max)
   HERMES_READ("loop_keypoints", loop_keypoints)
   HERMES_READ("k_min", k_min)
@@ -74,7 +72,7 @@ Status DistillParams::read(const Config& c) {
   HERMES_READ("trim_lambda", trim_lambda)
   HERMES_READ("trim_min_shared", trim_min_shared)
   HERMES_READ("trim_time_limit_s", trim_time_limit_s)
-  HERMES_READ("solver_limits", solver_limits)
+  if (s) s = c.getChoice(p + "solver_limits", {"auto", "time", "work"}, &solver_limits);
   HERMES_READ("milp_max_nodes", milp_max_nodes)
   HERMES_READ("trim_max_nodes", trim_max_nodes)
   HERMES_READ("trim_max_lp_iterations", trim_max_lp_iterations)
@@ -101,8 +99,7 @@ Status DistillParams::validate() const {
   auto bad = [](const std::string& what) { return Status(Error{"distill." + what}); };
   if (fixed_k < 1) return bad("fixed_k must be >= 1");
   if (!(eta > 0 && eta <= 1)) return bad("eta must be in (0, 1]");
-  if (!(window_s > 0)) return bad("window_s must be > 0");
-  if (probe_gain < 0) return bad("probe_gain must be >= 0");
+  if (!(window_s > 0)) return bad("window_s (window.period_s) must be > 0");
   if (k_min < 1 || k_max < k_min) return bad("k_min/k_max need 1 <= k_min <= k_max");
   if (loop_keypoints < 0) return bad("loop_keypoints must be >= 0");
   if (min_keyframe_rate_hz < 0) return bad("min_keyframe_rate_hz must be >= 0");
@@ -127,8 +124,8 @@ Status DistillParams::validate() const {
   if (grid_cols < 1 || grid_rows < 1) return bad("grid_cols/grid_rows must be >= 1");
   if (milp_rel_gap < 0 || milp_rel_gap >= 1) return bad("milp_rel_gap must be in [0, 1)");
   if (!(milp_time_limit_s > 0) || !(trim_time_limit_s > 0)) return bad("time limits must be > 0");
-  if (solver_limits != "time" && solver_limits != "work")
-    return bad("solver_limits must be time or work, got '" + solver_limits + "'");
+  if (solver_limits != "auto" && solver_limits != "time" && solver_limits != "work")
+    return bad("solver_limits must be auto, time or work, got '" + solver_limits + "'");
   if (milp_max_nodes < 1 || trim_max_nodes < 1 || trim_max_lp_iterations < 1)
     return bad("milp_max_nodes, trim_max_nodes, trim_max_lp_iterations must be >= 1");
   if (trim_w_rot < 0 || trim_w_trans < 0) return bad("trim weights must be >= 0");
@@ -145,8 +142,6 @@ void DistillParams::write(ConfigWriter* out) const {
   out->set(p + "coordinator", std::string(coordinator ? "on" : "off"));
   out->set(p + "fixed_k", fixed_k);
   out->set(p + "eta", eta);
-  out->set(p + "window_s", window_s);
-  out->set(p + "probe_gain", probe_gain);
   out->set(p + "k_max", k_max);
   out->set(p + "loop_keypoints", loop_keypoints);
   out->set(p + "k_min", k_min);

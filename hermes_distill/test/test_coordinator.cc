@@ -14,22 +14,18 @@ namespace hermes {
 namespace distill {
 namespace {
 
-TEST(Coordinator, BudgetFollowsEq17AndProbes) {
+TEST(Coordinator, BudgetFollowsEq17) {
   DistillParams p;
   p.eta = 0.8;
   p.window_s = 5.0;
-  p.probe_gain = 0.25;
   CoordinatorInput in;
   in.bandwidth_Bps = 10000;
   in.backlog_bytes = 3000;
   EXPECT_NEAR(budgetBytes(p, in), 0.8 * 10000 * 5 - 3000, 1e-9);
-  in.probe = true;
-  EXPECT_NEAR(budgetBytes(p, in), 0.8 * 10000 * 5 * 1.25 - 3000, 1e-9);
   in.bandwidth_Bps = 0;
   EXPECT_LT(budgetBytes(p, in), 0);
   in.bandwidth_Bps = 10000;
   in.backlog_bytes = 0;
-  in.probe = false;
   in.period_s = 15;  // a window carrying two deferred ones
   EXPECT_NEAR(budgetBytes(p, in), 0.8 * 10000 * 15, 1e-9);
 }
@@ -220,7 +216,7 @@ TEST(Coordinator, ProbingSendsMore) {
   CoordinatorInput in;
   in.bandwidth_Bps = 0.15 * referenceEncodedSize(w.submap) / (p.eta * p.window_s);
   const DistillResult base = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
-  in.probe = true;  // same (fresh) byte model, 25 % more budget
+  in.bandwidth_Bps *= 1.25;  // the monitor probing (uplink.monitor.probe_factor); same (fresh) byte model
   const DistillResult probe = Distiller(p, referenceEncodedSize).distill(w.submap, w.hint, in);
   ASSERT_FALSE(base.report.deferred);
   ASSERT_FALSE(probe.report.deferred);

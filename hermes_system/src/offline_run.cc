@@ -120,8 +120,7 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
 Expected<std::unique_ptr<agent::AgentPipeline>> OfflineRun::makePipeline(std::size_t i, bool fresh) {
   const OfflineAgent& a = agents_[i];
   const DatasetInfo& info = a.dataset->info();
-  agent::AgentPipelineParams ap = params_.run.agent;
-  ap.distill.solver_limits = params_.clock.solver_limits;  // deterministic by default
+  agent::AgentPipelineParams ap = params_.offlineAgent();  // deterministic solver limits
   ap.uplink.buffer.dir = (fs::path(spool_root_) / a.name).string();
   if (fresh) {
     std::error_code ec;

@@ -100,8 +100,7 @@ Status ClockParams::read(const Config& c) {
                    c.get("system.server_restart_at", &server_restart_at),
                    c.get("system.server_downtime_s", &server_downtime_s),
                    c.get("system.tracking_record_dir", &tracking_record_dir),
-                   c.get("system.tracking_replay_dir", &tracking_replay_dir),
-                   c.get("system.solver_limits", &solver_limits)})
+                   c.get("system.tracking_replay_dir", &tracking_replay_dir)})
     if (!s) return s;
   return validate();
 }
@@ -124,8 +123,6 @@ Status ClockParams::validate() const {
     if (r.agent.empty() || !(r.at_s >= 0) || !std::isfinite(r.at_s))
       return Error{"system.agent_reset: '" + formatAgentResets({r}) +
                    "' needs an agent name and a time >= 0 s"};
-  if (solver_limits != "work" && solver_limits != "time")
-    return Error{"system.solver_limits must be work or time, got '" + solver_limits + "'"};
   if ((!tracking_record_dir.empty() || !tracking_replay_dir.empty()) && !agent_reset.empty())
     return Error{"system.tracking_record_dir / tracking_replay_dir: not with system.agent_reset "
                  "(a reset tracks a fresh map)"};
@@ -143,7 +140,6 @@ void ClockParams::write(ConfigWriter& w) const {
   w.set("system.server_downtime_s", server_downtime_s);
   w.set("system.agent_reset", formatAgentResets(agent_reset));
   w.set("system.tracking_record_dir", tracking_record_dir);
-  w.set("system.solver_limits", solver_limits);
   w.set("system.tracking_replay_dir", tracking_replay_dir);
 }
 
@@ -162,11 +158,18 @@ Status SystemParams::validate() const {
   for (Status s : {run.validate(), server.validate(), link.validate(), relay.validate(), clock.validate(),
                    corrupt.validate(), transport.validate()})
     if (!s) return s;
+  // Both read server.credibility.w_ts / w_mc; only code can set them apart.
+  if (relay.w_ts != server.credibility.w_ts || relay.w_mc != server.credibility.w_mc)
+    return Error{"the relay's credibility weights (relay.w_ts / w_mc in code) differ from "
+                 "server.credibility.w_ts / w_mc, the one key for both"};
+  if (run.agent.uplink.auth.enabled != server.auth.enabled)
+    return Error{std::string("uplink.auth.enabled (the robots tag their frames) is ") +
+                 (run.agent.uplink.auth.enabled ? "true" : "false") + " but server.auth.enabled is " +
+                 (server.auth.enabled ? "true" : "false") + ": set both to the same value"};
   return Status::Ok();
 }
 
-std::string SystemParams::yaml() const {
-  ConfigWriter w;
+void SystemParams::write(ConfigWriter& w) const {
   run.write(&w);
   server.write(w, "server.");
   link.write(w);
@@ -174,7 +177,18 @@ std::string SystemParams::yaml() const {
   clock.write(w);
   corrupt.write(&w);
   transport.write(w);
+}
+
+std::string SystemParams::yaml() const {
+  ConfigWriter w;
+  write(w);
   return w.yaml();
+}
+
+agent::AgentPipelineParams SystemParams::offlineAgent() const {
+  agent::AgentPipelineParams ap = run.agent;
+  if (ap.distill.solver_limits == "auto") ap.distill.solver_limits = "work";
+  return ap;
 }
 
 Expected<SystemParams> readSystemParams(const Config& config) {

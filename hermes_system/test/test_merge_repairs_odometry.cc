@@ -66,8 +66,8 @@ TEST(MergeRepairsOdometry, CleanAndCorruptedRobots) {
     // is in the world better than its odometry does (measured: jump 1.5 cm
     // against 19.9 cm; drift 6.6 cm against 7.3 cm: the drift goes on between the
     // updates, one per merged window, so its bound is looser). The run is the same
-    // on every machine load: before the distiller's work limits it ended at 3.2 or
-    // 5.8 cm from one run to the next (system.solver_limits).
+    // on every machine load (distill.solver_limits auto: work limits in the offline
+    // runner).
     ASSERT_TRUE(victim->global_pose_final_m) << kind;
     EXPECT_LE(*victim->global_pose_final_m, (kind == "jump" ? 0.5 : 0.92) * *victim->raw_ate_rmse_m) << kind;
     const AgentMetrics* other = agentMetrics(bad, "MH_01_easy");

@@ -123,7 +123,7 @@ TEST(NewMapAfterLoss, DarkStretchStartsANewSessionThatLoopsTie) {
 
 TEST(NewMapAfterLoss, ANewSessionThatNeverMeetsTheMapIsReportedApart) {
   system::SystemParams params = test_support::testRunParams();
-  params.run.agent.tracker.window.period_s = 2.5;  // windows of the new session before the end
+  params.run.agent.setWindowPeriod(2.5);  // windows of the new session before the end
   params.server.bookkeeper.relocalisation_timeout_s = 1.5;
   const std::string victim = test_support::hallSequences().back();
   double dark_end = 0;

@@ -138,7 +138,7 @@ TEST(OfflineRun, LossAndOutageStillDeliverEveryWindowOnceAndRepeat) {
       // Repeatable to the byte: the simulated clock and the link's draws are
       // fixed, and the distillation MILPs stop at work limits, not at a
       // wall-clock limit a loaded machine would reach at another point
-      // (system.solver_limits work).
+      // (distill.solver_limits auto = work in the offline runner).
       EXPECT_EQ(bytes, bytes_first);
       EXPECT_EQ(r.metrics.agents_merged, first.metrics.agents_merged);
       ASSERT_TRUE(r.metrics.ate_rmse_m && first.metrics.ate_rmse_m);
@@ -151,7 +151,7 @@ TEST(OfflineRun, AgentsSideBySideGiveTheSameRunAsOneThread) {
   // Two threads feed the agents of a step at once; their sends reach the lossy,
   // narrow link in one-thread order, so every seeded loss draw, acknowledgement
   // and merge is the same. The MILP selection and trimming stop at work limits
-  // (system.solver_limits work), so no wall-clock limit can vary them.
+  // (distill.solver_limits auto = work here), so no wall-clock limit can vary them.
   const std::string trace = ::testing::TempDir() + "/hermes_offline_threads_trace.csv";
   std::ofstream(trace) << "time_s,rate_mbitps,latency_ms,loss\n0,1,30,0.15\n";
   system::SystemParams p = baseParams();

@@ -329,7 +329,7 @@ int runNoServer(const Args& args, system::SystemParams& params, std::unique_ptr<
   if (fs::path(params.run.agent.uplink.buffer.dir).is_relative())
     params.run.agent.uplink.buffer.dir = (out / params.run.agent.uplink.buffer.dir).string();
   agent::AgentCamera camera{info.K, info.baseline, info.T_B_C};
-  auto pipeline = agent::AgentPipeline::create(params.run.agent, name, camera);
+  auto pipeline = agent::AgentPipeline::create(params.offlineAgent(), name, camera);
   if (!pipeline.ok()) return badInput(pipeline.error());
   std::size_t n = info.frame_count;
   if (args.max_frames > 0 && std::size_t(args.max_frames) < n) n = std::size_t(args.max_frames);

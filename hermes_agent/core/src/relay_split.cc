@@ -9,8 +9,8 @@ namespace hermes::agent {
 
 Status RelayParams::read(const Config& c) {
   for (Status s : {c.get("relay.enabled", &enabled), c.get("relay.min_mbitps", &min_mbitps),
-                   c.get("relay.own_min_share", &own_min_share), c.get("relay.w_ts", &w_ts),
-                   c.get("relay.w_mc", &w_mc), c.get("relay.ack_retry_s", &ack_retry_s)})
+                   c.get("relay.own_min_share", &own_min_share), c.get(kCredibilityWts, &w_ts),
+                   c.get(kCredibilityWmc, &w_mc), c.get("relay.ack_retry_s", &ack_retry_s)})
     if (!s) return s;
   return validate();
 }
@@ -20,7 +20,7 @@ Status RelayParams::validate() const {
     return Error{"relay.min_mbitps must be >= 0 Mbit/s"};
   if (!(own_min_share >= 0 && own_min_share < 1)) return Error{"relay.own_min_share must be in [0, 1)"};
   if (!(w_ts >= 0) || !(w_mc >= 0) || !(w_ts + w_mc > 0) || !std::isfinite(w_ts + w_mc))
-    return Error{"relay.w_ts and relay.w_mc must be >= 0 and not both 0"};
+    return Error{std::string(kCredibilityWts) + " and " + kCredibilityWmc + " must be >= 0 and not both 0"};
   if (!(ack_retry_s > 0) || !std::isfinite(ack_retry_s)) return Error{"relay.ack_retry_s must be > 0"};
   return Status::Ok();
 }
@@ -29,8 +29,8 @@ void RelayParams::write(ConfigWriter& w) const {
   w.set("relay.enabled", enabled);
   w.set("relay.min_mbitps", min_mbitps);
   w.set("relay.own_min_share", own_min_share);
-  w.set("relay.w_ts", w_ts);
-  w.set("relay.w_mc", w_mc);
+  w.set(kCredibilityWts, w_ts);
+  w.set(kCredibilityWmc, w_mc);
   w.set("relay.ack_retry_s", ack_retry_s);
 }
 

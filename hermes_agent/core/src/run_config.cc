@@ -5,6 +5,7 @@ namespace hermes::agent {
 Status AgentPipelineParams::read(const Config& config) {
   if (Status s = tracker.read(config); !s) return s;
   if (Status s = distill.read(config); !s) return s;
+  distill.window_s = tracker.window.period_s;  // one key for the window cut and Δt of Eq. 17
   if (Status s = uplink.read(config); !s) return s;
   if (Status s = threads.read(config); !s) return s;
   return validate();
@@ -12,6 +13,10 @@ Status AgentPipelineParams::read(const Config& config) {
 
 Status AgentPipelineParams::validate() const {
   if (Status s = tracker.validate(); !s) return s;
+  if (distill.window_s != tracker.window.period_s)
+    return Error{"distill.window_s (Δt of the bandwidth budget, in code) is " + std::to_string(distill.window_s) +
+                 " s but window.period_s (the tracker cuts a window this often) is " +
+                 std::to_string(tracker.window.period_s) + " s: they must be equal (window.period_s sets both)"};
   if (Status s = distill.validate(); !s) return s;
   if (Status s = threads.validate(); !s) return s;
   return uplink.validate();

@@ -71,8 +71,7 @@ const test::RenderedClip& clip() {
 /// Raw windows (every keyframe and landmark, no budget) once a second.
 agent::AgentPipelineParams windowParams(bool parallel, const std::string& spool) {
   agent::AgentPipelineParams p;
-  p.tracker.window.period_s = 1.0;
-  p.distill.window_s = 1.0;
+  p.setWindowPeriod(1.0);
   p.distill.strategy = "none";
   p.uplink.buffer.dir = spool;
   p.uplink.buffer.fsync = false;
@@ -245,8 +244,7 @@ TEST(AgentThreads, HeldUplinkMergesWindowsAndShutdownSubmitsThem) {
   Captured out;
   out.gate = &gate;
   agent::AgentPipelineParams params = windowParams(true, spoolDir("held_uplink"));
-  params.tracker.window.period_s = 0.25;
-  params.distill.window_s = 0.25;
+  params.setWindowPeriod(0.25);
   params.threads.window_queue = 2;
   auto p = makePipeline(params, &out);
   feedAll(p.get());

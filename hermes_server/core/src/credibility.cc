@@ -29,8 +29,8 @@ void CredibilityParams::write(ConfigWriter& w, const std::string& p) const {
 
 Status CredibilityParams::validate() const {
   if (!(w_ts >= 0 && w_mc >= 0 && w_ts + w_mc > 0))
-    return Error{"server.credibility: weights w_ts=" + std::to_string(w_ts) + ", w_mc=" +
-                 std::to_string(w_mc) + " must be >= 0 and not both 0"};
+    return Error{"server.credibility.w_ts and w_mc must be >= 0 and not both 0, got w_ts=" + std::to_string(w_ts) +
+                 ", w_mc=" + std::to_string(w_mc)};
   if (!(aging_per_s >= 0 && std::isfinite(aging_per_s)))
     return Error{"server.credibility.aging_per_s must be >= 0, got " + std::to_string(aging_per_s)};
   if (history < 0) return Error{"server.credibility.history must be >= 0"};

@@ -1,7 +1,9 @@
 // Bandwidth coordinator (DESIGN §3, Eq. 17): byte budget, byte model, and the
 // choice of (N_KF, K).
 //
-//   S = η · B̂ · Δt · (1 + probe_gain if probing) − backlog_bytes
+//   S = η · B̂ · Δt − backlog_bytes
+// (B̂ is the rate the agent plans with: the bandwidth monitor's estimate, times
+// uplink.monitor.probe_factor while it probes for more.)
 //   bytes ≈ c0 + c_KF·N_KF + c_obs·(kept observations) + c_LM·(kept landmarks)
 // The c· are refitted by ridge-regularised least squares (towards the configured
 // prior, so few samples stay well posed) over the most recent real encodings.
@@ -27,7 +29,6 @@ struct CoordinatorInput {
   double bandwidth_Bps = 0;   ///< B̂, estimated uplink rate [bytes/s]
   double backlog_bytes = 0;   ///< bytes still unacknowledged in the buffer
   int loop_closures = 0;      ///< loops found so far (α rule)
-  bool probe = false;         ///< last window's budget was fully delivered: probe higher
   /// B̂ comes from acknowledged data (not the start guess), nothing sent is still
   /// unacknowledged and the window carries no deferred one (a deferral means the
   /// link is tight): only then may spare budget carry loop keypoints.
@@ -36,7 +37,7 @@ struct CoordinatorInput {
   /// window that would have carried loop keypoints on a link that keeps up
   /// holds them back (DistillResult::held_back) for later keyframe extensions.
   bool link_unmeasured = false;
-  /// Time the window stands for [s]; 0 = one window period (distill.window_s). A
+  /// Time the window stands for [s]; 0 = one window period (window.period_s). A
   /// window carrying deferred ones stands for all their periods: the link had
   /// that long for it (else the floor, which grows with the span, never fits).
   double period_s = 0;

@@ -14,8 +14,6 @@
 //                             distill.max_keyframes, no byte budget
 //   distill.fixed_k           landmarks kept per keyframe when the coordinator is off
 //   distill.eta               safety factor on the bandwidth budget [-]
-//   distill.window_s          distillation period Δt [s]
-//   distill.probe_gain        budget increase when probing (last window fully delivered) [-]
 //   distill.delta             δ of q_a and f(S) [-]
 //   distill.epsilon           ε of Eq. 14 [-]
 //   distill.lambda_support    λ₁ (per missing landmark of a keyframe's support)
@@ -34,12 +32,14 @@
 //   distill.trim_lambda       λ of Eq. 15 (per missing landmark observation)
 //   distill.trim_min_shared   landmarks two consecutive kept keyframes must share
 //   distill.trim_time_limit_s CBC time limit of the trimming MILP [s]
-//   distill.solver_limits     time | work: what stops the two MILPs. time (a robot):
-//                             the wall-clock limits above, so a loaded CPU gets a
-//                             worse selection, never a late one. work (the offline
-//                             runner sets it, system.solver_limits): deterministic
-//                             work limits instead, no clock read, so a run gives
-//                             the same submaps on any machine and load:
+//   distill.solver_limits     auto | time | work: what stops the two MILPs. time (a
+//                             robot): the wall-clock limits above, so a loaded CPU
+//                             gets a worse selection, never a late one. work:
+//                             deterministic work limits instead, no clock read, so
+//                             a run gives the same submaps on any machine and load.
+//                             auto: work in the offline runner (it resolves it,
+//                             SystemParams::offlineAgent), time everywhere else.
+//                             The work limits:
 //   distill.milp_max_nodes    CBC branch-and-bound nodes per selection
 //   distill.trim_max_nodes    CBC nodes of the trimming MILP
 //   distill.trim_max_lp_iterations  Clp iterations of the trimming MILP's root LP
@@ -59,6 +59,9 @@
 //   distill.fill_accept       a fitting selection at or above this fraction of S is
 //                             kept; below it (and K < k_max) K grows for another round [-]
 //   distill.bytes_c0, bytes_kf, bytes_obs, bytes_lm   initial byte model [B]
+// Not keys of this section: the period Δt (window_s) is the agent's window.period_s
+// (AgentPipelineParams sets it), and probing for more bandwidth is the bandwidth
+// monitor's (uplink.monitor.probe_factor scales the rate the budget is planned with).
 #pragma once
 
 #include <string>
@@ -77,8 +80,8 @@ struct DistillParams {
 
   // Coordinator (Eq. 17).
   double eta = 0.8;
+  /// Δt [s]: set from window.period_s by the agent (not read from distill.*).
   double window_s = 5.0;
-  double probe_gain = 0.25;
   int k_max = 150;
   int loop_keypoints = 400;
   int k_min = 15;
@@ -115,8 +118,8 @@ struct DistillParams {
   double trim_lambda = 0.05;
   int trim_min_shared = 10;
   double trim_time_limit_s = 0.05;
-  // What stops the MILPs (see the key list above).
-  std::string solver_limits = "time";
+  // What stops the MILPs (see the key list above); auto = time unless resolved.
+  std::string solver_limits = "auto";
   int milp_max_nodes = 10;
   int trim_max_nodes = 10;
   int trim_max_lp_iterations = 1500;
@@ -163,7 +166,7 @@ struct DistillParams {
   double bytes_obs = 44;
   double bytes_lm = 64;
 
-  /// Reads every key under `distill.`; missing keys keep their defaults.
+  /// Reads every key under `distill.` (window_s is not one); missing keys keep their defaults.
   Status read(const Config& config);
   Status validate() const;
   void write(ConfigWriter* out) const;

@@ -79,11 +79,6 @@ struct ClockParams {
   /// tracked and recorded (trackingMode). Empty: off. Not with agent_reset or
   /// agent.parallel.
   std::string tracking_record_dir, tracking_replay_dir;
-  /// What stops the agents' distillation MILPs in the offline runner: "work"
-  /// (deterministic node / iteration limits: a run gives the same result on any
-  /// machine load) or "time" (the wall-clock limits a robot uses). Replaces each
-  /// agent's distill.solver_limits (distill/params.h).
-  std::string solver_limits = "work";
 
   Status read(const Config& config);
   Status validate() const;
@@ -102,9 +97,15 @@ struct SystemParams {
   transport::TransportParams transport;
 
   Status read(const Config& config);
+  /// Every module's validate(), then the keys that must agree across modules.
   Status validate() const;
+  /// Every key with its value (what yaml() holds).
+  void write(ConfigWriter& out) const;
   /// The YAML written as OUT/config_used.yaml (reads back to the same params).
   std::string yaml() const;
+  /// The agent pipeline as the offline runner runs it: distill.solver_limits
+  /// auto becomes work (deterministic: the same result on any machine load).
+  agent::AgentPipelineParams offlineAgent() const;
 };
 
 /// Reads SystemParams and fails when a key was read by no module (the message

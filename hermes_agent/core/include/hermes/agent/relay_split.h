@@ -23,12 +23,18 @@
 
 namespace hermes::agent {
 
+/// The credibility weights: one pair of keys for the relay and the server's queue
+/// (server.credibility, credibility.h), which score credibility alike.
+constexpr const char* kCredibilityWts = "server.credibility.w_ts";
+constexpr const char* kCredibilityWmc = "server.credibility.w_mc";
+
+/// Keys relay.* and the credibility weights (kCredibilityWts, kCredibilityWmc).
 struct RelayParams {
   bool enabled = true;          ///< a robot out of the server's reach hands its submaps to a robot it reaches
   double min_mbitps = 1.0;      ///< [Mbit/s] guaranteed uplink share per relayed robot with data waiting
   double own_min_share = 0.3;   ///< least fraction of the weights the relay's own map keeps
-  double w_ts = 0.5;            ///< weight of transmission stability
-  double w_mc = 0.5;            ///< weight of map connectivity
+  double w_ts = 0.5;            ///< weight of transmission stability (kCredibilityWts)
+  double w_mc = 0.5;            ///< weight of map connectivity (kCredibilityWmc)
   double ack_retry_s = 0.5;     ///< [s] an acknowledgement the link to the origin dropped is sent again after this
 
   Status read(const Config& c);

@@ -28,7 +28,12 @@ struct AgentPipelineParams {
   UplinkParams uplink;               ///< section uplink (buffer, monitor)
   AgentThreadParams threads;         ///< section agent (parallel, window_queue)
 
+  /// The window period: the tracker's cut (window.period_s) and the budget's Δt.
+  void setWindowPeriod(double period_s) { tracker.window.period_s = distill.window_s = period_s; }
+
+  /// Reads every section; distill.window_s comes from window.period_s.
   Status read(const Config& config);
+  /// Every section's validate(), and distill.window_s == tracker.window.period_s.
   Status validate() const;
   void write(ConfigWriter* out) const;
 };
