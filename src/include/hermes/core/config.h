@@ -61,6 +61,8 @@ class ConfigWriter {
   void set(const std::string& key, const std::vector<double>& v);
   /// Nested YAML text.
   std::string yaml() const;
+  /// Every key written, dotted, with its YAML scalar / flow text (sorted by key).
+  const std::map<std::string, std::string>& values() const { return values_; }
 
  private:
   std::map<std::string, std::string> values_;  // dotted key -> YAML scalar/flow text
