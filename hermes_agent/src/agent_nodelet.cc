@@ -25,8 +25,9 @@
 //        spool cap -- what the delivery tests count as "sent" -- and `frames`:
 //        images received, pairs, frames tracked / lost, rejected per cause;
 //        `threads`: local BA jobs, keyframes merged / skipped, windows queued
-// Params (private): robot (default: the namespace), camera (a name under
-// config/cameras/ or a calibration file / folder: camera_calibration.h),
+// Params (private; all read in one place, agent_node_params.h): robot (default:
+// the namespace), camera (a name under config/cameras/ or a calibration file /
+// folder: camera_calibration.h),
 // mode (stereo|rgbd; default: the calibration's kind, else stereo),
 // rectified (auto|true|false: stereo images rectified already; overrides
 // camera_input.stereo_images), config (YAML, default config/hermes.yaml),
@@ -93,6 +94,7 @@
 #include "hermes/agent/dataset_feed.h"
 #include "hermes/core/frame_auth.h"
 #include "hermes/transport/mqtt_links.h"
+#include "agent_node_params.h"
 #include "odom_publisher.h"
 #include "ros_convert.h"
 #include "ros_relay.h"
@@ -121,33 +123,16 @@ class AgentNodelet : public nodelet::Nodelet {
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
-    ros::NodeHandle& pnh = getPrivateNodeHandle();
-    std::string ns = nh.getNamespace();
-    while (!ns.empty() && ns.front() == '/') ns.erase(0, 1);
-    pnh.param("robot", robot_, ns.empty() ? std::string("agent") : ns);
-    std::string config_file = std::string(HERMES_SOURCE_DIR) + "/config/hermes.yaml", dataset,
-                camera, rectified = "auto";
-    pnh.param("mode", mode_, mode_);
-    pnh.param("config", config_file, config_file);
-    pnh.param("dataset", dataset, dataset);
-    pnh.param("camera", camera, camera);
-    pnh.param("queue_size", queue_size_, queue_size_);
-    if (pnh.hasParam("rectified")) {  // true/false arrive as bools from roslaunch
-      bool b = false;
-      if (pnh.getParam("rectified", b)) rectified = b ? "true" : "false";
-      else pnh.getParam("rectified", rectified);
-    }
-    if (!mode_.empty() && mode_ != "stereo" && mode_ != "rgbd") {
-      NODELET_FATAL("Agent %s: ~mode must be stereo or rgbd, got '%s'", robot_.c_str(), mode_.c_str());
-      return;
-    }
-    if (rectified != "auto" && rectified != "true" && rectified != "false") {
-      NODELET_FATAL("Agent %s: ~rectified must be auto, true or false, got '%s'", robot_.c_str(),
-                    rectified.c_str());
-      return;
-    }
-    if (queue_size_ < 1) {
-      NODELET_FATAL("Agent %s: ~queue_size must be >= 1, got %d", robot_.c_str(), queue_size_);
+    const AgentNodeParams np = AgentNodeParams::read(nh, getPrivateNodeHandle());
+    robot_ = np.robot;
+    mode_ = np.mode;
+    queue_size_ = np.queue_size;
+    const std::string& config_file = np.config_file;
+    const std::string& dataset = np.dataset;
+    const std::string& camera = np.camera;
+    const std::string& rectified = np.rectified;
+    if (Status s = np.validate(); !s) {
+      NODELET_FATAL("Agent %s: %s", robot_.c_str(), s.error().c_str());
       return;
     }
     auto config = hermes::loadConfig(config_file, {});
@@ -159,22 +144,21 @@ class AgentNodelet : public nodelet::Nodelet {
     }
     params_ = run.agent;
     input_params_ = run.camera_input;
-    if (!setUpTransport(pnh, *config)) return;
+    if (!setUpTransport(np, *config)) return;
     if (rectified != "auto") input_params_.stereo_images = rectified == "true" ? "rectified" : "raw";
     // Real time: tracking never waits for local BA or the window step (worker
     // threads, agent_threads.h); ~parallel false runs them inside the image
     // callback as the offline runner does.
-    pnh.param("parallel", params_.threads.parallel, true);
+    params_.threads.parallel = np.parallel;
     // uplink_status is summarised every second for hours: over a bounded window.
-    pnh.param("timing_window", params_.threads.timing_window,
-              params_.threads.timing_window > 0 ? params_.threads.timing_window : 3000);
-    pnh.param("spool_dir", params_.uplink.buffer.dir, "/tmp/hermes_spool/" + robot_);
-    if (!readRelayParams(pnh)) return;
+    params_.threads.timing_window =
+        np.timing_window.value_or(params_.threads.timing_window > 0 ? params_.threads.timing_window : 3000);
+    params_.uplink.buffer.dir = np.spool_dir.value_or("/tmp/hermes_spool/" + robot_);
+    if (!readRelayParams(np)) return;
     // Frame authentication: ~auth (launch default true) and ~key_file override
     // uplink.auth.*; the key is checked now, not at the first frame.
-    pnh.param("auth", params_.uplink.auth.enabled, params_.uplink.auth.enabled);
-    if (std::string key_file; pnh.getParam("key_file", key_file) && !key_file.empty())
-      params_.uplink.auth.key_file = key_file;
+    params_.uplink.auth.enabled = np.auth.value_or(params_.uplink.auth.enabled);
+    if (!np.key_file.empty()) params_.uplink.auth.key_file = np.key_file;
     if (params_.uplink.auth.enabled) {
       const std::string path = params_.uplink.auth.keyFileFor(robot_);
       if (auto key = hermes::readKeyFile(path); !key) {
@@ -186,9 +170,7 @@ class AgentNodelet : public nodelet::Nodelet {
     } else {
       NODELET_WARN("Agent %s: frame authentication is OFF", robot_.c_str());
     }
-    bool clear_spool = false;  // tests and demos: start without the previous run's backlog
-    pnh.param("clear_spool", clear_spool, clear_spool);
-    if (clear_spool) {  // drop the backlog, keep the session counter (see discardPending)
+    if (np.clear_spool) {  // tests and demos: start without the previous run's backlog, same session counter
       auto spool = hermes::agent::MapBuffer::open(params_.uplink.buffer);
       auto dropped = spool.ok() ? spool->discardPending()
                                 : hermes::Expected<std::size_t>(hermes::Error{spool.error()});
@@ -286,16 +268,15 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   /// ~transport / the config's transport; with mqtt, the link to the broker.
-  bool setUpTransport(ros::NodeHandle& pnh, const hermes::Config& config) {
+  bool setUpTransport(const AgentNodeParams& np, const hermes::Config& config) {
     hermes::transport::TransportParams tp;
     if (hermes::Status s = tp.read(config); !s) {
       NODELET_FATAL("Agent %s: config: %s", robot_.c_str(), s.error().c_str());
       return false;
     }
-    std::string kind;
-    if (pnh.getParam("transport", kind) && !kind.empty()) tp.kind = kind;
-    pnh.param("mqtt_host", tp.mqtt.host, tp.mqtt.host);
-    pnh.param("mqtt_port", tp.mqtt.port, tp.mqtt.port);
+    if (!np.transport.empty()) tp.kind = np.transport;
+    tp.mqtt.host = np.mqtt_host.value_or(tp.mqtt.host);
+    tp.mqtt.port = np.mqtt_port.value_or(tp.mqtt.port);
     if (hermes::Status s = tp.validate(); !s) {
       NODELET_FATAL("Agent %s: ~transport / ~mqtt_*: %s", robot_.c_str(), s.error().c_str());
       return false;
@@ -317,12 +298,10 @@ class AgentNodelet : public nodelet::Nodelet {
   }
 
   /// ~relay_via / ~relay_for / ~relay_spool_dir, checked (ROS transport only, no chains).
-  bool readRelayParams(ros::NodeHandle& pnh) {
-    std::string relay_for;
-    pnh.param("relay_via", relay_via_, relay_via_);
-    pnh.param("relay_for", relay_for, relay_for);
-    pnh.param("relay_spool_dir", relay_spool_dir_, params_.uplink.buffer.dir + ".relay");
-    auto origins = hermes::agent::parseRobotList(relay_for);
+  bool readRelayParams(const AgentNodeParams& np) {
+    relay_via_ = np.relay_via;
+    relay_spool_dir_ = np.relay_spool_dir.value_or(params_.uplink.buffer.dir + ".relay");
+    auto origins = hermes::agent::parseRobotList(np.relay_for);
     Status ok = origins.ok() ? Status::Ok() : Status(hermes::Error{"~relay_for: " + origins.error()});
     if (ok && !relay_via_.empty())
       if (Status s = hermes::agent::checkRobotName(relay_via_); !s) ok = hermes::Error{"~relay_via: " + s.error()};
