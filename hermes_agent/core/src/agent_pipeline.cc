@@ -46,6 +46,7 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
       T_C_B_(camera.T_B_C.inverse()),
       tracker_(params.tracker, camera.K, camera.baseline),
       window_(tracker_, params.tracker.window),
+      live_(tracker_, window_, T_C_B_),
       distiller_(std::move(distiller)),
       monitor_(params.uplink.monitor),
       timings_(static_cast<std::size_t>(params.threads.timing_window)),
@@ -94,7 +95,7 @@ void AgentPipeline::startWorkers(bool parallel) {
 
 Status AgentPipeline::setParallel(bool parallel) {
   if (frames_ > 0) return Error{"agent " + name_ + ": choose the threading before the first frame"};
-  if (parallel && (recorder_ || replay_))
+  if (parallel && (recording_ || replay_))
     return Error{"agent " + name_ + ": tracking record / replay needs synchronous mode (agent.parallel: false)"};
   params_.threads.parallel = parallel;
   startWorkers(parallel);
@@ -165,115 +166,95 @@ Status AgentPipeline::checkStamp(double stamp) const {
 }
 
 Expected<TrackResult> AgentPipeline::feed(const CameraFrame& frame) {
-  if (replay_) return Error{"agent " + name_ + ": replaying a tracking recording: no frames to feed"};
-  if (Status s = checkStamp(frame.stamp); !s) return Error{s.error()};
-  const auto t0 = std::chrono::steady_clock::now();
-  if (corruptor_ && corruptor_->noticedJumpAt(frame.stamp)) tracker_.markLost();
-  auto result = tracker_.feed(frame);
-  timings_.add("track", msSince(t0));
-  if (!result.ok()) return Error{"agent " + name_ + ": " + result.error()};
-  last_stamp_ = frame.stamp;
-  ++frames_;
-  if (result->status == TrackingStatus::kOk) {
-    lost_since_ = -1;
-  } else if (result->status == TrackingStatus::kLost) {
-    if (lost_since_ < 0) lost_since_ = frame.stamp;
-    const double after = params_.tracker.reinit_after_s;
-    // Not while recording or replaying tracking: a recording holds one map.
-    if (after > 0 && frame.stamp - lost_since_ >= after && !recorder_) {
-      startNewMap();
-      result = tracker_.feed(frame);  // the new map starts from this frame if it can
-      if (!result.ok()) return Error{"agent " + name_ + ": " + result.error()};
-    }
-  }
-  if (result->status == TrackingStatus::kOk) {
-    // Body pose in the odometry world: T_W_B = T_W_C * T_C_B.
-    SE3 T_W_B = result->T_W_C * T_C_B_;
-    if (corruptor_) T_W_B = corruptor_->onFrame(frame.stamp, T_W_B) * T_W_B;
-    trajectory_.push_back(StampedPose{frame.stamp, T_W_B});
-  } else {
-    ++lost_;
-  }
-  const auto t1 = std::chrono::steady_clock::now();
-  if (window_worker_)
-    queueWindowStep(frame.stamp, frame.stamp);
-  else
-    windowStep(frame.stamp);
-  timings_.add("window", msSince(t1));
-  timings_.add("agent_total", msSince(t0));
-  if (recorder_) {
-    TrackingStep step;
-    step.stamp = frame.stamp;
-    step.status = result->status;
-    if (result->status == TrackingStatus::kOk) step.T_W_B = trajectory_.back().T_W_B;
-    recordStep(std::move(step));
-    if (!tracking_status_) return Error{"agent " + name_ + ": " + tracking_status_.error()};
-  }
-  return result;
-}
-
-Status AgentPipeline::recordTracking(std::unique_ptr<TrackingLogWriter> writer) {
-  if (frames_ > 0 || replay_ || recorder_)
-    return Error{"agent " + name_ + ": start recording before the first frame, once, not while replaying"};
-  if (window_worker_)
-    return Error{"agent " + name_ + ": tracking record needs synchronous mode (agent.parallel: false)"};
-  recorder_ = std::move(writer);
-  return Status::Ok();
-}
-
-void AgentPipeline::recordStep(TrackingStep step) {
-  step.motion = window_.motionHint();
-  step.window = std::move(tapped_);
-  tapped_.reset();
-  if (tracking_status_) tracking_status_ = recorder_->append(step);
-}
-
-Status AgentPipeline::finishTracking() {
-  if (replay_) {
-    if (tracking_status_ && !replay_->done())
-      tracking_status_ = Error{"tracking replay: steps of the recording were left over"};
-  } else if (recorder_) {
-    if (tracking_status_) {
-      TrackingSummary summary;
-      summary.frames = frames_;
-      summary.lost = lost_;
-      summary.keyframes = static_cast<std::int64_t>(tracker_.keyframes().size());
-      summary.landmarks = static_cast<std::int64_t>(tracker_.landmarks().size());
-      summary.total_health = tracker_.totalHealth();
-      tracking_status_ = recorder_->close(summary);
-    }
-    recorder_.reset();
-  }
-  if (!tracking_status_) return Error{"agent " + name_ + ": " + tracking_status_.error()};
-  return Status::Ok();
-}
-
-Status AgentPipeline::replayTracking(TrackingLog log) {
-  if (frames_ > 0 || replay_ || recorder_)
-    return Error{"agent " + name_ + ": start replaying before the first frame, once, not while recording"};
-  if (window_worker_)
-    return Error{"agent " + name_ + ": tracking replay needs synchronous mode (agent.parallel: false)"};
-  replay_ = std::make_unique<ReplayTracker>(std::move(log));
-  replay_->setAgent(agent_id_, session_);
-  return Status::Ok();
+  if (!front_->needsImages())
+    return Error{"agent " + name_ + ": replaying a tracking recording: no frames to feed"};
+  auto step = trackStep(&frame, frame.stamp);
+  if (!step.ok()) return Error{step.error()};
+  return std::move(step->result);
 }
 
 Expected<TrackingStatus> AgentPipeline::replayFrame(double stamp) {
   if (!replay_) return Error{"agent " + name_ + ": not replaying a tracking recording"};
+  auto step = trackStep(nullptr, stamp);
+  if (!step.ok()) return Error{step.error()};
+  return step->result.status;
+}
+
+Expected<FrontStep> AgentPipeline::trackStep(const CameraFrame* frame, double stamp) {
   if (Status s = checkStamp(stamp); !s) return Error{s.error()};
   const auto t0 = std::chrono::steady_clock::now();
-  auto step = replay_->next(/*flush=*/false, stamp);
+  auto step = front_->track(frame, stamp);
+  if (frame) timings_.add("track", msSince(t0));
   if (!step.ok()) return Error{"agent " + name_ + ": " + step.error()};
   last_stamp_ = stamp;
   ++frames_;
-  if ((*step)->status == TrackingStatus::kOk)
-    trajectory_.push_back(StampedPose{stamp, (*step)->T_W_B});
+  if (step->result.status == TrackingStatus::kOk) {
+    lost_since_ = -1;
+  } else if (step->result.status == TrackingStatus::kLost) {
+    if (lost_since_ < 0) lost_since_ = stamp;
+    const double after = params_.tracker.reinit_after_s;
+    if (after > 0 && stamp - lost_since_ >= after && front_->startsNewMaps()) {
+      startNewMap();
+      step = front_->track(frame, stamp);  // the new map starts from this frame if it can
+      if (!step.ok()) return Error{"agent " + name_ + ": " + step.error()};
+    }
+  }
+  if (step->result.status == TrackingStatus::kOk)
+    trajectory_.push_back(StampedPose{stamp, step->T_W_B});
   else
     ++lost_;
-  windowStep(stamp);
-  timings_.add("window", msSince(t0));
+  const auto t1 = std::chrono::steady_clock::now();
+  if (window_worker_)
+    queueWindowStep(stamp, stamp);
+  else
+    windowStep(stamp);
+  timings_.add("window", msSince(t1));
   timings_.add("agent_total", msSince(t0));
-  return (*step)->status;
+  if (Status s = front_->endStep(&*step, stamp); !s) return Error{"agent " + name_ + ": " + s.error()};
+  return step;
+}
+
+void AgentPipeline::stackFronts() {
+  if (replay_) {
+    front_ = replay_.get();
+    return;
+  }
+  TrackingFront* front = &live_;
+  if (corrupted_) {
+    corrupted_->wrap(front);
+    front = corrupted_.get();
+  }
+  if (recording_) {
+    recording_->wrap(front);
+    front = recording_.get();
+  }
+  front_ = front;
+}
+
+Status AgentPipeline::recordTracking(std::unique_ptr<TrackingLogWriter> writer) {
+  if (frames_ > 0 || replay_ || recording_)
+    return Error{"agent " + name_ + ": start recording before the first frame, once, not while replaying"};
+  if (window_worker_)
+    return Error{"agent " + name_ + ": tracking record needs synchronous mode (agent.parallel: false)"};
+  recording_ = std::make_unique<RecordingFront>(std::move(writer));
+  stackFronts();
+  return Status::Ok();
+}
+
+Status AgentPipeline::finishTracking() {
+  if (Status s = front_->finish(frames_, lost_); !s) return Error{"agent " + name_ + ": " + s.error()};
+  return Status::Ok();
+}
+
+Status AgentPipeline::replayTracking(TrackingLog log) {
+  if (frames_ > 0 || replay_ || recording_)
+    return Error{"agent " + name_ + ": start replaying before the first frame, once, not while recording"};
+  if (window_worker_)
+    return Error{"agent " + name_ + ": tracking replay needs synchronous mode (agent.parallel: false)"};
+  replay_ = std::make_unique<ReplayFront>(std::move(log));
+  replay_->setAgent(agent_id_, session_);
+  stackFronts();
+  return Status::Ok();
 }
 
 Status AgentPipeline::submitWindow(const Submap& submap, std::vector<std::uint8_t>&& bytes, double now) {
@@ -305,19 +286,7 @@ WindowSink AgentPipeline::makeSink(double now, double backlog_bytes, std::mutex*
 }
 
 void AgentPipeline::windowStep(double stamp, bool retry_carry) {
-  if (replay_) {
-    windowStepOn(*replay_, stamp, retry_carry);
-  } else if (recorder_) {
-    WindowTap tap(window_);
-    windowStepOn(tap, stamp, retry_carry);
-    if (tap.taken()) tapped_ = std::move(tap.taken());
-  } else {
-    windowStepOn(window_, stamp, retry_carry);
-  }
-}
-
-template <typename Source>
-void AgentPipeline::windowStepOn(Source& source, double stamp, bool retry_carry) {
+  TrackingFront& source = *front_;
   if (!uplink_) {
     if (retry_carry)
       agent::retryCarriedWindow(source, *distiller_, monitor_, stamp, &windows_, &timings_);
@@ -336,8 +305,8 @@ void AgentPipeline::windowStepOn(Source& source, double stamp, bool retry_carry)
 }
 
 void AgentPipeline::setOdometryCorruption(const OdometryCorruptionParams& params) {
-  corruptor_ = std::make_unique<OdometryCorruptor>(params);
-  window_.setHook([c = corruptor_.get()](Submap* w) { c->apply(w); });
+  corrupted_ = std::make_unique<CorruptedFront>(params, tracker_);
+  stackFronts();
 }
 
 void AgentPipeline::retryCarriedWindow(double now) {
@@ -404,34 +373,23 @@ void AgentPipeline::flushWindow() {
   }
   // A stamp one window period after the last frame makes the open window due.
   const double stamp = last_stamp_ + params_.tracker.window.period_s + 1e-6;
-  if (replay_) {
-    auto step = replay_->next(/*flush=*/true, stamp);
-    if (!step.ok()) {  // reported by finishTracking(); no window is cut
-      if (tracking_status_) tracking_status_ = Error{step.error()};
-      return;
-    }
-  }
+  if (!front_->beginFlush(stamp)) return;  // a replay out of step: finishTracking() reports it
   windowStep(stamp);
-  if (recorder_) {
-    TrackingStep step;
-    step.flush = true;
-    step.stamp = stamp;
-    recordStep(std::move(step));
-  }
+  (void)front_->endStep(nullptr, stamp);  // a recording's error: finishTracking() reports it
 }
 
 AgentMetrics AgentPipeline::metrics() const {
   AgentMetrics m;
   m.agent = name_;
   m.lost_rate = lostRate();
-  const TrackingSummary* replayed = replay_ ? &replay_->summary() : nullptr;
-  m.keyframes = replayed ? replayed->keyframes : static_cast<std::int64_t>(tracker_.keyframes().size());
-  m.landmarks = replayed ? replayed->landmarks : static_cast<std::int64_t>(tracker_.landmarks().size());
+  const TrackingSummary tracked = front_->summary();
+  m.keyframes = tracked.keyframes;
+  m.landmarks = tracked.landmarks;
   const WindowCounters w = windows();
   m.bytes = w.bytes;
   m.submaps_sent = w.sent;
   m.submaps_deferred = w.deferred + w.refused;
-  m.weak_frames = replayed ? replayed->total_health.weak : tracker_.totalHealth().weak;
+  m.weak_frames = tracked.total_health.weak;
   m.trouble_windows = w.trouble;
   m.new_maps = new_maps_;
   return m;
@@ -470,13 +428,13 @@ AgentThreadStats AgentPipeline::threadStats() const {
 }
 
 void AgentPipeline::queueWindowStep(double stamp, double link_stamp) {
-  std::optional<Submap> window = window_.takeWindowIfDue(stamp);
+  std::optional<Submap> window = front_->takeWindowIfDue(stamp);
   WindowJob job;
   job.stamp = stamp;
   job.link_stamp = link_stamp;
   if (window) {
     job.window = std::move(window);
-    job.motion = window_.motionHint();
+    job.motion = front_->motionHint();
   } else {
     // No new window (the robot stands still): a carried one is retried once a
     // period, as runWindowStep does (the published state may be a job old).

@@ -20,7 +20,6 @@ std::optional<Submap> WindowCut::takeWindowIfDue(double t) {
   if (t - last_t_ < params_.period_s || next_kf_ >= last) return std::nullopt;
   Submap s = buildWindow(keyframes, tracker_.landmarks(), tracker_.lostBefore(), next_kf_, last,
                          tracker_.intrinsics(), header_, params_);
-  if (hook_) hook_(&s);
   ++header_.seq;
   next_kf_ = last;
   last_t_ = t;

@@ -9,7 +9,7 @@
 #include <random>
 
 #include "hermes/agent/tracking_log.h"
-#include "hermes/agent/tracking_source.h"
+#include "hermes/agent/tracking_front.h"
 
 using namespace hermes;
 using namespace hermes::agent;
@@ -196,11 +196,11 @@ TEST(TrackingLog, KeyMismatchNamesTheField) {
   EXPECT_NE(s.error().find("corruption"), std::string::npos) << s.error();
 }
 
-TEST(TrackingLog, ReplayTrackerHandsOutTheRecordedStepsInOrder) {
+TEST(TrackingLog, ReplayFrontHandsOutTheRecordedStepsInOrder) {
   const Recorded r = writeSample("tracking_replay_source");
   auto log = readTrackingLog(r.path);
   ASSERT_TRUE(log.ok()) << log.error();
-  ReplayTracker replay(std::move(*log));
+  ReplayFront replay(std::move(*log));
   replay.setAgent(agentUuid("other"), 5);
   EXPECT_FALSE(replay.next(false, r.steps[0].stamp + 1).ok());  // out of step
   for (std::size_t i = 0; i + 1 < r.steps.size(); ++i) {

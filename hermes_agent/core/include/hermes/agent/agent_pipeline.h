@@ -30,12 +30,14 @@
 //    destructor finishes queued windows and joins the threads;
 //  * uplink() is for single-threaded use; read the sender through withUplink().
 //
-// Tracking record / replay (tracking_log.h, synchronous mode only): with
-// recordTracking() every feed() and flushWindow() also appends what the tracker
-// produced (status, body pose, the window cut and the motion hint) to a
-// recording; with replayTracking() no image is tracked: replayFrame(stamp)
-// takes the next recorded frame instead of feed() and the window step runs on
-// the recorded windows (ReplayTracker), exactly as it ran on the tracker's.
+// The experiment and test hooks wrap the tracking stage (tracking_front.h), so
+// feed() reads the same with or without them: odometry corruption
+// (setOdometryCorruption), tracking record (recordTracking: every feed() and
+// flushWindow() also appends what the tracker produced, the window cut and the
+// motion hint to a recording) and replay (replayTracking: no image is tracked;
+// replayFrame(stamp) takes the next recorded frame instead of feed() and the
+// window step runs on the recorded windows, exactly as it ran on the
+// tracker's). Record and replay need synchronous mode.
 #pragma once
 
 #include <atomic>
@@ -50,10 +52,9 @@
 
 #include "hermes/agent/agent_threads.h"
 #include "hermes/agent/bandwidth_monitor.h"
-#include "hermes/agent/odometry_corruption.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/tracker.h"
-#include "hermes/agent/tracking_source.h"
+#include "hermes/agent/tracking_front.h"
 #include "hermes/agent/uplink_sender.h"
 #include "hermes/agent/window_cut.h"
 #include "hermes/agent/window_step.h"
@@ -218,13 +219,13 @@ class AgentPipeline {
   /// The window step at tracker time `stamp` (uplink time: the last frame's;
   /// when retrying the carried window: stamp - clock offset).
   void windowStep(double stamp, bool retry_carry = false);
-  /// windowStep on `source`: the tracker, a WindowTap or the ReplayTracker.
-  template <typename Source>
-  void windowStepOn(Source& source, double stamp, bool retry_carry);
   /// A frame stamp must be finite and after the previous frame's (feed, replayFrame).
   Status checkStamp(double stamp) const;
-  /// Appends a step to the recording (the first error is kept).
-  void recordStep(TrackingStep step);
+  /// One frame (null: replayed) through the front, the lost-and-new-map rule
+  /// and the window step.
+  Expected<FrontStep> trackStep(const CameraFrame* frame, double stamp);
+  /// Points front_ at the outermost front: (recording)(corrupted)(live), or the replay.
+  void stackFronts();
   /// Hands an encoded window to the uplink at uplink time `now` (parallel mode:
   /// under uplink_mu_) and tells the monitor whether the previous one arrived.
   Status submitWindow(const Submap& submap, std::vector<std::uint8_t>&& bytes, double now);
@@ -255,6 +256,7 @@ class AgentPipeline {
   SE3 T_C_B_;
   Tracker tracker_;    ///< tracking, keyframes, local mapping (mapping_stage.h)
   WindowCut window_;   ///< the map since the last window, every window period
+  LiveFront live_;     ///< tracker_ + window_ as the window step's source
   std::unique_ptr<distill::Distiller> distiller_;
   Trajectory trajectory_;
   Uuid agent_id_{};
@@ -276,11 +278,10 @@ class AgentPipeline {
   /// new session starts at the last body pose (tracking never ends for good).
   void startNewMap();
   BandwidthMonitor monitor_;
-  std::unique_ptr<OdometryCorruptor> corruptor_;
-  std::unique_ptr<TrackingLogWriter> recorder_;
-  Status tracking_status_;  ///< first record / replay error
-  std::optional<Submap> tapped_;  ///< recording: the window the last step cut
-  std::unique_ptr<ReplayTracker> replay_;
+  std::unique_ptr<CorruptedFront> corrupted_;  ///< the hooks (tracking_front.h)
+  std::unique_ptr<RecordingFront> recording_;
+  std::unique_ptr<ReplayFront> replay_;
+  TrackingFront* front_ = &live_;  ///< the outermost front (stackFronts)
   WindowCounters windows_;
   double last_stamp_ = 0;
   TimingStats timings_;

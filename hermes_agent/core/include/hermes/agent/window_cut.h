@@ -15,7 +15,6 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <functional>
 #include <optional>
 
 #include "hermes/agent/submap_window.h"
@@ -32,8 +31,6 @@ class WindowCut {
 
   /// Identity written into the headers of the windows.
   void setAgent(const Uuid& agent, std::uint32_t session);
-  /// Called on every window handed out (test hooks, e.g. odometry corruption).
-  void setHook(std::function<void(Submap*)> hook) { hook_ = std::move(hook); }
   /// The keyframes inserted since the previous window once `t` is at least
   /// period_s after the previous window's hand-over; nullopt otherwise or if no
   /// new keyframe is mapped yet.
@@ -52,7 +49,6 @@ class WindowCut {
   std::size_t next_kf_ = 0;   ///< first keyframe of the next window
   double last_t_ = 0;         ///< [s] the previous hand-over
   bool started_ = false;
-  std::function<void(Submap*)> hook_;
   distill::TrackingHealth health_;  ///< of the last window handed out
 };
 

@@ -1,8 +1,8 @@
 // The agent's window step: every window period the window source hands over the
 // map since the previous window as a Submap, which is distilled under the uplink
 // budget and encoded. A window source has takeWindowIfDue(stamp) and
-// motionHint(): the live window cut (window_cut.h), or the stand-ins that record
-// or replay tracking (tracking_source.h).
+// motionHint(): the pipeline's tracking front (tracking_front.h: the live window
+// cut, or a wrapper that corrupts, records or replays it).
 #pragma once
 
 #include <chrono>
