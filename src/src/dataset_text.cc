@@ -17,6 +17,21 @@ std::string trim(const std::string& s) {
   return s.substr(b, e - b + 1);
 }
 
+Status forEachDataLine(const std::string& path, const std::string& what,
+                       const std::function<Status(const std::string& text, const std::string& where)>& row) {
+  std::ifstream in(path);
+  if (!in) return Error{what + " '" + path + "' cannot be opened"};
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const std::string t = trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    if (Status s = row(t, path + ":" + std::to_string(lineno)); !s) return s;
+  }
+  return Status::Ok();
+}
+
 std::vector<std::string> splitFields(const std::string& s, char sep) {
   std::vector<std::string> out;
   std::string::size_type start = 0;

@@ -7,7 +7,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <unordered_map>
 
@@ -150,45 +149,29 @@ Status writeEurocCameraYaml(const std::string& path, const PinholeRadtan& cam,
 }
 
 Expected<std::vector<EurocImageRow>> readEurocImageCsv(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return Error{"image list '" + path + "' cannot be opened"};
   std::vector<EurocImageRow> rows;
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    const std::string t = trim(line);
-    if (t.empty() || t[0] == '#') continue;
+  Status s = forEachDataLine(path, "image list", [&](const std::string& t, const std::string& where) -> Status {
     const auto comma = t.find(',');
-    const std::string where = path + ":" + std::to_string(lineno);
-    if (comma == std::string::npos)
-      return Error{where + ": expected 'timestamp_ns,filename'"};
+    if (comma == std::string::npos) return Error{where + ": expected 'timestamp_ns,filename'"};
     EurocImageRow row;
     if (!parseInt64(trim(t.substr(0, comma)), &row.stamp_ns) || row.stamp_ns < 0)
       return Error{where + ": bad timestamp '" + t.substr(0, comma) + "'"};
     row.filename = trim(t.substr(comma + 1));
     if (row.filename.empty() || row.filename.find(',') != std::string::npos)
       return Error{where + ": expected one file name after the timestamp"};
-    if (!rows.empty() && row.stamp_ns <= rows.back().stamp_ns)
-      return Error{where + ": timestamps must increase"};
+    if (!rows.empty() && row.stamp_ns <= rows.back().stamp_ns) return Error{where + ": timestamps must increase"};
     rows.push_back(std::move(row));
-  }
+    return Status::Ok();
+  });
+  if (!s) return Error{s.error()};
   return rows;
 }
 
 Expected<Trajectory> readEurocGroundTruth(const std::string& path,
                                           std::vector<std::int64_t>* stamps_ns) {
-  std::ifstream in(path);
-  if (!in) return Error{"ground truth '" + path + "' cannot be opened"};
   Trajectory traj;
   std::vector<std::int64_t> stamps;
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    const std::string t = trim(line);
-    if (t.empty() || t[0] == '#') continue;
-    const std::string where = path + ":" + std::to_string(lineno);
+  Status s = forEachDataLine(path, "ground truth", [&](const std::string& t, const std::string& where) -> Status {
     const std::vector<std::string> f = splitFields(t, ',');
     if (f.size() < 8) return Error{where + ": expected at least 8 fields 'ns,px,py,pz,qw,qx,qy,qz'"};
     std::int64_t ns = 0;
@@ -201,7 +184,9 @@ Expected<Trajectory> readEurocGroundTruth(const std::string& path,
     if (!stamps.empty() && ns <= stamps.back()) return Error{where + ": timestamps must increase"};
     stamps.push_back(ns);
     traj.push_back({nsToSeconds(ns), SE3(q, Vec3(v[0], v[1], v[2]))});
-  }
+    return Status::Ok();
+  });
+  if (!s) return Error{s.error()};
   if (traj.empty()) return Error{"ground truth '" + path + "' holds no poses"};
   if (stamps_ns) *stamps_ns = std::move(stamps);
   return traj;

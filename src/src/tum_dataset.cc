@@ -216,27 +216,20 @@ Status writeTumCameraYaml(const std::string& path, const RgbdCamera& cam) {
 }
 
 Expected<std::vector<TumImageRow>> readTumImageList(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return Error{"image list '" + path + "' cannot be opened"};
   std::vector<TumImageRow> rows;
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    const std::string t = trim(line);
-    if (t.empty() || t[0] == '#') continue;
+  Status s = forEachDataLine(path, "image list", [&](const std::string& t, const std::string& where) -> Status {
     std::istringstream ss(t);
     std::string stamp, file, extra;
     ss >> stamp >> file;
-    const std::string where = path + ":" + std::to_string(lineno);
     TumImageRow row;
-    if (!parseDouble(stamp, &row.t) || row.t < 0)
-      return Error{where + ": bad timestamp '" + stamp + "'"};
+    if (!parseDouble(stamp, &row.t) || row.t < 0) return Error{where + ": bad timestamp '" + stamp + "'"};
     if (file.empty() || (ss >> extra)) return Error{where + ": expected 'timestamp filename'"};
     row.filename = file;
     if (!rows.empty() && row.t <= rows.back().t) return Error{where + ": timestamps must increase"};
     rows.push_back(std::move(row));
-  }
+    return Status::Ok();
+  });
+  if (!s) return Error{s.error()};
   return rows;
 }
 
