@@ -23,7 +23,8 @@ BANDWIDTH=10
 
 usage() {
   cat <<'H'
-usage: ./hermes demo [--out DIR] [--start S] [--duration S] [--rate HZ] [--bandwidth MBITPS] [--plain] [--fresh] [--json]
+usage: ./hermes demo [--out DIR] [--start S] [--duration S] [--rate HZ] [--bandwidth MBITPS]
+                   [--fault jump|drift|none] [--set KEY=VALUE ...] [--plain] [--fresh] [--json]
   Installs what is missing (apt, ROS-free core only), builds, renders three robots
   (EuRoC MH_01..03 trajectories from --start 20 s for --duration 30 s at --rate 20 Hz;
   realistic renders (hermes_sim's default), cached in
@@ -31,12 +32,19 @@ usage: ./hermes demo [--out DIR] [--start S] [--duration S] [--rate HZ] [--bandw
   3 agents + the server over one shared emulated link (default 10 Mbit/s) on a
   simulated clock, prints the report and writes metrics, trajectories and plots under OUT
   (default results/demo in the working directory).
+  --fault: what goes wrong with robot MH_03_medium's odometry, for the merge to repair:
+  jump (default: a wrong relocalisation, 0.5 m / 10 deg at 15 s), drift (3 % of its path
+  for 20 s from 5 s) or none. Its observations stay right, so loops to the others still
+  place it; the report names the fault.
+  --set KEY=VALUE: any configuration key for the run (docs/configuration.md), repeatable.
   --plain: the plain look instead (every realism effect off; cached in .../s<start>_d<duration>_r<rate>).
   --fresh: render again.  --json: print the metrics JSON instead of the report.
 H
 }
 FRESH=0
 JSON=0
+FAULT=jump
+SETS=()
 LOOK=realistic
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -46,12 +54,22 @@ while [[ $# -gt 0 ]]; do
     --duration) DURATION="$2"; shift 2 ;;
     --rate) RATE="$2"; shift 2 ;;
     --bandwidth) BANDWIDTH="$2"; shift 2 ;;
+    --fault) FAULT="$2"; shift 2 ;;
+    --set) SETS+=(--set "$2"); shift 2 ;;
     --fresh) FRESH=1; shift ;;
     --plain) LOOK=plain; shift ;;
     --json) JSON=1; shift ;;
     *) echo "hermes demo: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+
+case "$FAULT" in
+  jump) SETS=(--set corrupt.agent=MH_03_medium --set corrupt.kind=jump --set corrupt.at_s=15 "${SETS[@]}") ;;
+  drift) SETS=(--set corrupt.agent=MH_03_medium --set corrupt.kind=drift --set corrupt.at_s=5
+               --set corrupt.drift_duration_s=20 "${SETS[@]}") ;;
+  none) ;;
+  *) echo "hermes demo: --fault '$FAULT': expected jump, drift or none (see --help)" >&2; exit 2 ;;
+esac
 
 GT_DIR="$ROOT/config/trajectories"   # shipped EuRoC ground truth (see its README)
 [[ -f "$GT_DIR/MH_01_easy.txt" ]] || { echo "hermes demo: no EuRoC ground-truth trajectories in $GT_DIR" >&2; exit 2; }
@@ -90,7 +108,7 @@ else
 fi
 
 echo "[demo] running 3 agents + server over one shared ${BANDWIDTH} Mbit/s link"
-RUN_ARGS=(--out "$OUT" --bandwidth "$BANDWIDTH")
+RUN_ARGS=(--out "$OUT" --bandwidth "$BANDWIDTH" "${SETS[@]}")
 for seq in MH_01_easy MH_02_easy MH_03_medium; do RUN_ARGS+=(--dataset "$CACHE/$KEY/$seq"); done
 if [[ $JSON -eq 1 ]]; then
   "$BIN/hermes_run" "${RUN_ARGS[@]}" --json --quiet
@@ -108,8 +126,11 @@ on its own, in its own frame; it says nothing about where the robot is relative 
 others. "merged" is the robot's place in the one map the server built of all of them
 (which no robot has alone), under one alignment for all robots: it counts the robot's own
 error and how well it sits relative to the others, so it can lie above its odometry (the
-others' error spread over it) or below (loops that fixed its drift). "sent" is everything
-the robots put on the one shared link, against what streaming their cameras would take.
+others' error spread over it) or below (loops that fixed its drift). "injected" names the
+fault the demo gave one robot's odometry (--fault none: without): its odometry error is
+the fault's, its merged error what the loops to the other robots left of it. "sent" is
+everything the robots put on the one shared link, against raw streaming of the same maps
+and against streaming their cameras.
 
 rendered data : $CACHE/$KEY  (3 robots, EuRoC layout, one shared hall, ${LOOK} look)
 metrics       : $OUT/metrics.json

@@ -180,6 +180,7 @@ Status OfflineRun::replacePipeline(std::size_t i, double t, bool takeoff) {
   r.old_session = a.pipeline->session();
   r.bytes_sent_before = static_cast<std::int64_t>(a.pipeline->uplink()->stats().bytes_sent);
   r.submaps_sent_before = a.pipeline->submapsSent();
+  r.window_bytes_before = a.pipeline->windows().window_bytes;
   if (takeoff && a.pipeline->hasCarriedWindow()) ++a.windows_lost_landed;
   a.pipeline.reset();  // a crash: the open window and the map are gone, the spool stays
   auto pipeline = makePipeline(i, /*fresh=*/false);

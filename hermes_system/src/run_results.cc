@@ -297,7 +297,11 @@ RunResults evaluateRun(const OfflineRun& run) {
   }
   loopAccuracy(run, &res);
   res.map = summarizeMap(run, m.agents_merged.value_or(0));
-  for (const OfflineAgent& a : run.agents()) res.camera_bytes += std::int64_t(a.next) * cameraFrameBytes(a);
+  for (const OfflineAgent& a : run.agents()) {
+    res.camera_bytes += std::int64_t(a.next) * cameraFrameBytes(a);
+    res.raw_streaming_bytes += a.pipeline->windows().window_bytes;
+    for (const AgentResetRecord& r : a.resets) res.raw_streaming_bytes += r.window_bytes_before;
+  }
   res.durability = summarizeDurability(run);
   res.relay = summarizeRelay(run);
   return res;
@@ -326,6 +330,7 @@ nlohmann::json resultsJson(const RunResults& res) {
                      {"robot_path_m", g.robot_path_m},
                      {"extent_m", {g.extent_m.x(), g.extent_m.y(), g.extent_m.z()}}};
   j["camera_bytes_total"] = res.camera_bytes;
+  j["raw_streaming_bytes_total"] = res.raw_streaming_bytes;
   if (!res.warnings.empty()) j["warnings"] = res.warnings;
   if (res.durability) j.update(durabilityJson(*res.durability));
   if (res.relay) j["relay"] = relayJson(*res.relay);
@@ -545,12 +550,17 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
   const double sent_mb = double(m.bytes_total.value_or(0)) / 1e6;
   std::snprintf(buf, sizeof buf, "  sent      %.1f MB (link %s)", sent_mb, link.c_str());
   o << buf;
+  o << '\n';
+  if (res.raw_streaming_bytes > 0) {
+    std::snprintf(buf, sizeof buf, "            %.0f %% of the %.1f MB raw streaming of the same maps would send\n",
+                  100.0 * sent_mb * 1e6 / double(res.raw_streaming_bytes), double(res.raw_streaming_bytes) / 1e6);
+    o << buf;
+  }
   if (res.camera_bytes > 0) {
-    std::snprintf(buf, sizeof buf, ": %.2f %% of the %.0f MB of images the cameras took (uncompressed)",
+    std::snprintf(buf, sizeof buf, "            %.2f %% of the %.0f MB of images the cameras took (uncompressed)\n",
                   100.0 * sent_mb * 1e6 / double(res.camera_bytes), double(res.camera_bytes) / 1e6);
     o << buf;
   }
-  o << '\n';
   std::snprintf(buf, sizeof buf, "  %-14s %20s   %24s   %9s\n", "ATE [cm]", "odometry (own frame)",
                 "merged (one map for all)", "flown [m]");
   o << buf;
@@ -567,6 +577,19 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
   }
   std::snprintf(buf, sizeof buf, "  %-14s %20s   %24s\n", "all robots", "", cell(m.ate_rmse_m).c_str());
   o << buf;
+
+  const agent::OdometryCorruptionParams& c = run.params().corrupt;
+  if (c.active()) {  // a fault the test hooks injected (config corrupt.*): say so beside the numbers it moves
+    if (c.kind == "jump")
+      std::snprintf(buf, sizeof buf,
+                    "  injected  %s's odometry jumps %.2f m / %.1f deg at %.1f s (a wrong relocalisation; corrupt.*)\n",
+                    c.agent.c_str(), c.jump_m, c.jump_deg, c.at_s);
+    else
+      std::snprintf(buf, sizeof buf,
+                    "  injected  %s's odometry drifts %.1f %% of its path for %.0f s from %.1f s (corrupt.*)\n",
+                    c.agent.c_str(), 100.0 * c.drift_fraction, c.drift_duration_s, c.at_s);
+    o << buf;
+  }
 
   // The details.
   std::snprintf(buf, sizeof buf, "uplink: %.1f kB in all, mean %.1f kB/s, peak %.1f kB/s\n",

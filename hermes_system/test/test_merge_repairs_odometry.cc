@@ -8,6 +8,8 @@
 // robot barely disturbed.
 #include <gtest/gtest.h>
 
+#include <string>
+
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
 #include "support/hall_run.h"
@@ -16,12 +18,16 @@ using namespace hermes;
 
 namespace {
 
-system::RunResults runMeeting(const system::SystemParams& params, const std::string& tag) {
+/// The run's results; `report` (optional) receives its printed report.
+system::RunResults runMeeting(const system::SystemParams& params, const std::string& tag,
+                              std::string* report = nullptr) {
   auto run = test_support::makeMeetingRun(params, tag);
   if (!run) return {};
   EXPECT_TRUE(run->run());
   system::RunResults r = system::evaluateRun(*run);
-  std::printf("[%s]\n%s", tag.c_str(), system::formatReport(*run, r).c_str());
+  const std::string text = system::formatReport(*run, r);
+  std::printf("[%s]\n%s", tag.c_str(), text.c_str());
+  if (report) *report = text;
   return r;
 }
 
@@ -34,8 +40,10 @@ const AgentMetrics* agentMetrics(const system::RunResults& r, const std::string&
 }  // namespace
 
 TEST(MergeRepairsOdometry, CleanAndCorruptedRobots) {
-  const system::RunResults clean = runMeeting(test_support::testRunParams(), "clean");
+  std::string report;
+  const system::RunResults clean = runMeeting(test_support::testRunParams(), "clean", &report);
   ASSERT_EQ(clean.metrics.agents_merged.value_or(0), 2);
+  EXPECT_EQ(report.find("injected"), std::string::npos) << report;
   for (const AgentMetrics& a : clean.metrics.per_agent) {
     ASSERT_TRUE(a.raw_ate_rmse_m && a.merged_ate_rmse_m) << a.agent;
     // One common alignment for both robots, still no worse than each one's own odometry.
@@ -56,8 +64,12 @@ TEST(MergeRepairsOdometry, CleanAndCorruptedRobots) {
     p.corrupt.kind = kind;
     p.corrupt.at_s = kind == "jump" ? 15 : 5;
     p.corrupt.drift_duration_s = 20;
-    const system::RunResults bad = runMeeting(p, kind);
+    const system::RunResults bad = runMeeting(p, kind, &report);
     ASSERT_EQ(bad.metrics.agents_merged.value_or(0), 2) << kind;
+    // The report says what was injected, beside the numbers it moves.
+    EXPECT_NE(report.find(std::string("injected  MH_02_easy's odometry ") + (kind == "jump" ? "jumps" : "drifts")),
+              std::string::npos)
+        << report;
     const AgentMetrics* victim = agentMetrics(bad, "MH_02_easy");
     ASSERT_TRUE(victim && victim->raw_ate_rmse_m && victim->merged_ate_rmse_m) << kind;
     EXPECT_GT(*victim->raw_ate_rmse_m, 0.05) << kind << ": the hook should have corrupted the odometry";

@@ -1,8 +1,8 @@
 // The run report and metrics.json lead with what merging gave: the one map the
 // robots were placed in (robots, keyframes, landmarks, metres flown, extent), the
-// loops between robots, the bytes sent against the cameras' images, and each
-// robot's odometry ATE beside its ATE in the merged map. Three robots of the
-// rendered hall (rendered_hall.h), unlimited link.
+// loops between robots, the bytes sent against raw streaming and the cameras'
+// images, and each robot's odometry ATE beside its ATE in the merged map. Three
+// robots of the rendered hall (rendered_hall.h), unlimited link.
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -54,12 +54,19 @@ TEST(RunReport, LeadsWithTheOneMapTheRobotsWerePlacedIn) {
   EXPECT_GT(expected, 0);
   EXPECT_EQ(r.camera_bytes, expected);
   EXPECT_LT(r.metrics.bytes_total.value_or(0), r.camera_bytes);
+  // Raw streaming of the same windows: each robot's windows as cut, more than
+  // the distilled submaps sent.
+  std::int64_t windows = 0;
+  for (const system::OfflineAgent& a : run->agents()) windows += a.pipeline->windows().window_bytes;
+  EXPECT_EQ(r.raw_streaming_bytes, windows);
+  EXPECT_GT(r.raw_streaming_bytes, r.metrics.bytes_total.value_or(0));
 
   // The report's first lines: the one map, then a row per robot with both errors.
   EXPECT_EQ(report.rfind("one map: 3 of 3 robots placed in one world frame", 0), 0u) << report;
   const std::size_t table = report.find("odometry (own frame)");
   ASSERT_NE(table, std::string::npos) << report;
   EXPECT_LT(report.find("between robots"), table);
+  EXPECT_LT(report.find("raw streaming of the same maps"), table);
   EXPECT_LT(report.find("images the cameras took"), table);
   EXPECT_LT(table, report.find("uplink: "));  // the details come after
   for (const AgentMetrics& a : r.metrics.per_agent) EXPECT_NE(report.find("  " + a.agent, table), std::string::npos);
@@ -81,4 +88,5 @@ TEST(RunReport, LeadsWithTheOneMapTheRobotsWerePlacedIn) {
   ASSERT_EQ(m.at("extent_m").size(), 3u);
   EXPECT_DOUBLE_EQ(m.at("extent_m")[0].get<double>(), g.extent_m.x());
   EXPECT_EQ(j.at("camera_bytes_total").get<std::int64_t>(), r.camera_bytes);
+  EXPECT_EQ(j.at("raw_streaming_bytes_total").get<std::int64_t>(), r.raw_streaming_bytes);
 }

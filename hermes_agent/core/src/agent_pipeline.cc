@@ -481,6 +481,7 @@ void AgentPipeline::runWindowJob(WindowJob& job) {
     }
   } else {  // as runWindowStep: the carried window joins the new one
     c.windows += job.periods;
+    c.window_bytes += static_cast<std::int64_t>(encodedSizeUncompressed(*job.window));
     int periods = job.periods;
     Submap window = std::move(*job.window);
     if (c.carry) {

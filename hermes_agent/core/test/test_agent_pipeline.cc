@@ -270,6 +270,36 @@ TEST(WindowStep, DistillsAndEncodesEveryWindowWithinBudget) {
 
 // After the sequence ends no new window comes: a window the uplink refused is
 // tried again by retryCarriedWindow (standing for one more period), not lost.
+// window_bytes counts every window as cut: exactly what raw streaming
+// (distill.strategy none) sends of them on a link that keeps up; distillation
+// sends less of the same windows.
+TEST(WindowStep, WindowBytesAreWhatRawStreamingSends) {
+  auto scene = v101Scene();
+  ASSERT_TRUE(scene.ok()) << scene.error();
+  distill::DistillParams raw;
+  raw.strategy = "none";
+  auto streaming = distill::Distiller::create(raw, [](const Submap& s) { return encodedSizeUncompressed(s); });
+  ASSERT_TRUE(streaming.ok()) << streaming.error();
+  auto distilling = greedyDistiller();
+  ASSERT_TRUE(distilling.ok()) << distilling.error();
+  agent::BandwidthMonitorParams mp;
+  mp.initial_bps = 1e9;  // everything fits
+  agent::BandwidthMonitor monitor(mp);
+  agent::WindowCounters sent_raw, sent_distilled;
+  TimingStats timings;
+  SyntheticWindowSource source_raw(&*scene), source_distilled(&*scene);
+  for (int i = 0; i <= 400; ++i) {
+    agent::runWindowStep(source_raw, **streaming, monitor, 5.0 + 0.05 * i, &sent_raw, &timings);
+    agent::runWindowStep(source_distilled, **distilling, monitor, 5.0 + 0.05 * i, &sent_distilled, &timings);
+  }
+  ASSERT_EQ(sent_raw.windows, 5);
+  EXPECT_EQ(sent_raw.sent, sent_raw.windows);
+  EXPECT_GT(sent_raw.window_bytes, 0);
+  EXPECT_EQ(sent_raw.bytes, sent_raw.window_bytes);
+  EXPECT_EQ(sent_distilled.window_bytes, sent_raw.window_bytes);  // the same windows
+  EXPECT_LT(sent_distilled.bytes, sent_distilled.window_bytes);
+}
+
 TEST(WindowStep, CarriedWindowIsRetriedWithoutANewWindow) {
   auto scene = v101Scene();
   ASSERT_TRUE(scene.ok()) << scene.error();

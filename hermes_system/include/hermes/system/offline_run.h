@@ -117,6 +117,7 @@ struct AgentResetRecord {
   std::size_t spool_carried = 0;        ///< old-session submaps still in the spool, sent on
   std::int64_t bytes_sent_before = 0;   ///< the old pipeline's uplink bytes [B]
   std::int64_t submaps_sent_before = 0; ///< the old pipeline's submaps
+  std::int64_t window_bytes_before = 0; ///< the old pipeline's windows as cut (WindowCounters::window_bytes)
 };
 
 struct OfflineAgent {

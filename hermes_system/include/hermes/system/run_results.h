@@ -58,6 +58,10 @@ struct RunResults {
   /// grey stereo pairs; RGB + 16-bit depth): what streaming the cameras would send
   /// (metrics.json "camera_bytes_total").
   std::int64_t camera_bytes = 0;
+  /// Bytes raw streaming of the same windows would have sent: every window the
+  /// robots cut, encoded whole (WindowCounters::window_bytes; metrics.json
+  /// "raw_streaming_bytes_total").
+  std::int64_t raw_streaming_bytes = 0;
   std::optional<LoopAccuracy> loop_accuracy;
   std::map<std::string, std::size_t> loops_per_pair;  ///< "a-b" -> accepted loops
   std::vector<std::string> warnings;                  ///< e.g. an agent that could not be evaluated
@@ -69,6 +73,7 @@ struct RunResults {
 RunResults evaluateRun(const OfflineRun& run);
 
 /// metrics.json: the DESIGN §7 metrics plus "global_map", "camera_bytes_total",
+/// "raw_streaming_bytes_total",
 /// "loop_accuracy", "loops_per_pair", "warnings",
 /// and with checkpoints "server_durability" and "server_restarts" (durability_report.h).
 nlohmann::json resultsJson(const RunResults& results);

@@ -31,6 +31,9 @@ struct WindowCounters {
   std::int64_t windows = 0, sent = 0, deferred = 0, failed = 0;
   std::int64_t refused = 0;  ///< encoded but refused by the uplink's buffer (full)
   std::int64_t bytes = 0;  ///< encoded bytes of the sent submaps
+  /// Encoded size of every window as cut, before distillation: what raw streaming
+  /// (distill.strategy none) of the same windows would send on a link that keeps up.
+  std::int64_t window_bytes = 0;
   std::int64_t trouble = 0;  ///< windows sent as in trouble (DistillReport::trouble)
   std::int64_t carried = 0;  ///< windows merged into a later one after deferral / refusal
   std::int64_t carry_dropped_keyframes = 0;  ///< dropped by the kMaxCarryKeyframes bound
@@ -137,6 +140,7 @@ void runWindowStep(Source& source, distill::Distiller& distiller,
     return;
   }
   ++counters->windows;
+  counters->window_bytes += static_cast<std::int64_t>(encodedSizeUncompressed(*window));
   int periods = 1;
   if (counters->carry) {
     auto merged = mergeWindows(std::move(*counters->carry), *window);
