@@ -35,6 +35,10 @@
 // journals every submap before acknowledging it, checkpoints after merges and
 // on shutdown, and resumes from it on start; the core does all of it, see
 // hermes/server/server.h).
+// ~prior_map (overrides server.prior_map: start on an earlier mission's map, a
+// folder holding its checkpoint, e.g. hermes run's OUT/map or a checkpoint_dir
+// of that mission; never changed), ~prior_map_optional (bool: an unreadable
+// prior map is a warning and an empty start instead of a fatal error).
 // ~transport (ros | mqtt; default: the config's `transport`), ~mqtt_host,
 // ~mqtt_port (override mqtt.host / mqtt.port): with mqtt the submaps and
 // heartbeats come from hermes/+/submap and hermes/+/heartbeat through the broker
@@ -363,6 +367,9 @@ int main(int argc, char** argv) {
   if (std::string key_dir; pnh.getParam("key_dir", key_dir) && !key_dir.empty())
     sets.push_back("server.auth.key_dir=" + key_dir);
   pnh.param("checkpoint_dir", checkpoint_dir, checkpoint_dir);
+  if (std::string prior; pnh.getParam("prior_map", prior) && !prior.empty()) sets.push_back("server.prior_map=" + prior);
+  if (bool optional = false; pnh.getParam("prior_map_optional", optional))
+    sets.push_back(std::string("server.prior_map_optional=") + (optional ? "true" : "false"));
   auto config = hermes::loadConfig(config_file, sets);
   if (!config.ok()) {
     ROS_FATAL("hermes_server: %s", config.error().c_str());
@@ -418,6 +425,9 @@ int main(int argc, char** argv) {
              resume.checkpoint.empty() ? "the journal" : resume.checkpoint.c_str(),
              resume.journal_replayed, resume.load_ms, (*server)->bookkeeper().robots().size(),
              (*server)->pending());
+  if (!resume.prior_map.empty())
+    ROS_INFO("hermes_server: on the prior map %s: %d robots, %zu keyframes, in its world frame",
+             resume.prior_map.c_str(), (*server)->mapManager().priorAgents(), (*server)->map().keyframeCount());
   ServerNode node(std::move(*server), parallel, output_dir, period, std::move(mqtt));
   const std::string auth = params.auth.enabled ? "on, keys in " + params.auth.key_dir : "OFF";
   ROS_INFO("hermes_server: ready (config %s; merging %s; authentication %s%s%s)", config_file.c_str(),

@@ -182,6 +182,7 @@ MapSummary summarizeMap(const OfflineRun& run, std::int64_t agents_merged) {
   MapSummary s;
   const server::GlobalMap& map = run.server().map();
   s.robots = agents_merged;
+  s.prior_robots = run.server().mapManager().priorAgents();
   s.keyframes = static_cast<std::int64_t>(map.keyframeCount());
   s.landmarks = static_cast<std::int64_t>(map.landmarkCount());
   for (const server::LoopEdge& l : map.loops)
@@ -472,6 +473,19 @@ Status writeRunResults(const OfflineRun& run, const RunResults& res, const std::
                           run.server().map().landmarkPositionsWorld(), /*binary=*/true);
 }
 
+Status saveMapToResume(const server::Server& server, const std::string& dir) {
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+  if (ec) return Error{"cannot empty " + dir + ": " + ec.message()};
+  server::CheckpointParams params;
+  params.dir = dir;
+  auto store = server::CheckpointStore::open(params);
+  if (!store) return Error{store.error()};
+  auto written = store->write(server.saveState());
+  if (!written) return Error{written.error()};
+  return Status::Ok();
+}
+
 Status writeLoopAttempts(const OfflineRun& run, const std::vector<server::LoopAttempt>& attempts,
                          const std::string& path) {
   return writeFile(path, [&](std::ostream& o) {
@@ -537,8 +551,10 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
 
   // What merging gave first: one map holding every robot, which no robot has alone.
   const std::size_t robots = run.agents().size();
+  std::string prior;
+  if (g.prior_robots > 0) prior = " of a prior map (" + std::to_string(g.prior_robots) + " robots before)";
   std::snprintf(buf, sizeof buf, "one map: %lld of %zu robots placed in one world frame%s\n", ll(g.robots), robots,
-                robots > 1 ? " (alone, no robot knows where the others are)" : "");
+                !prior.empty() ? prior.c_str() : robots > 1 ? " (alone, no robot knows where the others are)" : "");
   o << buf;
   std::snprintf(buf, sizeof buf,
                 "  map       %lld keyframes, %lld landmarks; %.1f m flown in it, within %.1f x %.1f x %.1f m\n",

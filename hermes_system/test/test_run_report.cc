@@ -90,3 +90,35 @@ TEST(RunReport, LeadsWithTheOneMapTheRobotsWerePlacedIn) {
   EXPECT_EQ(j.at("camera_bytes_total").get<std::int64_t>(), r.camera_bytes);
   EXPECT_EQ(j.at("raw_streaming_bytes_total").get<std::int64_t>(), r.raw_streaming_bytes);
 }
+
+// A run saves its map (saveMapToResume, hermes run's OUT/map); a second run of
+// the same robots started on it (server.prior_map) places all three in the
+// prior's world frame, and its report says it ran on a prior map.
+TEST(RunReport, ASecondRunOnTheSavedMapPlacesItsRobotsInThePriorsFrame) {
+  auto first = test_support::makeHallRun(test_support::testRunParams(), "prior_first");
+  ASSERT_TRUE(first);
+  ASSERT_TRUE(first->run());
+  const std::string map_dir = ::testing::TempDir() + "/hermes_run_report_prior_map";
+  ASSERT_TRUE(system::saveMapToResume(first->server(), map_dir));
+  const std::size_t prior_keyframes = first->server().map().keyframeCount();
+
+  system::SystemParams p = test_support::testRunParams();
+  p.server.checkpoint.prior_map = map_dir;
+  auto second = test_support::makeHallRun(p, "prior_second");
+  ASSERT_TRUE(second);
+  EXPECT_EQ(second->server().resumeReport().prior_map.rfind(map_dir, 0), 0u);
+  ASSERT_TRUE(second->run());
+  const system::RunResults r = system::evaluateRun(*second);
+  const std::string report = system::formatReport(*second, r);
+  std::printf("%s", report.c_str());
+  EXPECT_EQ(r.map.robots, 3);
+  EXPECT_EQ(r.map.prior_robots, 3);
+  EXPECT_EQ(r.metrics.agents_merged.value_or(0), 3);
+  EXPECT_GT(r.map.keyframes, static_cast<std::int64_t>(prior_keyframes));
+  EXPECT_EQ(report.rfind("one map: 3 of 3 robots placed in one world frame of a prior map (3 robots before)", 0), 0u)
+      << report;
+  for (const AgentMetrics& a : r.metrics.per_agent) {
+    ASSERT_TRUE(a.merged_ate_rmse_m) << a.agent;
+    EXPECT_LT(*a.merged_ate_rmse_m, 0.05) << a.agent;
+  }
+}

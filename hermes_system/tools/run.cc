@@ -72,7 +72,7 @@ struct Args {
   std::string out, config;
   bool no_server = false, json = false, help = false, plots = true, quiet = false;
   std::string bandwidth, link_trace, scenario;
-  std::string record_tracking, replay_tracking;
+  std::string record_tracking, replay_tracking, prior_map;
   long max_frames = -1;
   std::vector<double> restart_at;
   std::vector<system::AgentReset> agent_reset;
@@ -135,6 +135,8 @@ std::string parseArgs(int argc, char** argv, Args* a) {
       if (!value(&a->record_tracking)) return "--record-tracking needs a folder";
     } else if (arg == "--replay-tracking") {
       if (!value(&a->replay_tracking)) return "--replay-tracking needs a folder";
+    } else if (arg == "--prior-map") {
+      if (!value(&a->prior_map)) return "--prior-map needs a folder (an earlier run's OUT/map)";
     } else if (arg == "--max-frames") {
       if (!value(&v)) return "--max-frames needs N";
       char* end = nullptr;
@@ -160,6 +162,7 @@ std::string parseArgs(int argc, char** argv, Args* a) {
     return "--agent-reset needs the server (drop --no-server)";
   if (a->no_server && (!a->record_tracking.empty() || !a->replay_tracking.empty()))
     return "--record-tracking / --replay-tracking need the server (drop --no-server)";
+  if (a->no_server && !a->prior_map.empty()) return "--prior-map needs the server (drop --no-server)";
   return "";
 }
 
@@ -230,6 +233,10 @@ int main(int argc, char** argv) {
   if (!args.scenario.empty()) sets.push_back("link.scenario=" + args.scenario);
   if (!args.record_tracking.empty()) sets.push_back("system.tracking_record_dir=" + args.record_tracking);
   if (!args.replay_tracking.empty()) sets.push_back("system.tracking_replay_dir=" + args.replay_tracking);
+  if (!args.prior_map.empty()) {
+    if (!fs::is_directory(args.prior_map, ec)) return badInput("prior map " + args.prior_map + " is not a folder");
+    sets.push_back("server.prior_map=" + args.prior_map);
+  }
   auto config = loadConfig(args.config, sets);
   if (!config.ok()) return badInput(config.error());
   auto params = system::readSystemParams(*config);
@@ -298,7 +305,8 @@ int main(int argc, char** argv) {
       system::RunResults partial = system::evaluateRun(**run);
       partial.metrics.incomplete = true;
       partial.metrics.stopped_because = s.error();
-      if (Status w = system::writeRunResults(**run, partial, out.string()); w.ok())
+      if (Status w = system::writeRunResults(**run, partial, out.string()); w.ok() &&
+          system::saveMapToResume((*run)->server(), (out / "map").string()))
         std::fprintf(stderr, "hermes_run: the results so far are in %s (marked incomplete)\n",
                      out.string().c_str());
     }
@@ -307,6 +315,8 @@ int main(int argc, char** argv) {
   const double wall_s = wall();
   const system::RunResults results = system::evaluateRun(**run);
   if (Status w = system::writeRunResults(**run, results, out.string()); !w) return failure(w.error());
+  if (Status w = system::saveMapToResume((*run)->server(), (out / "map").string()); !w)
+    return failure(w.error());
   if (Status w = system::writeLoopAttempts(**run, attempts, (out / "loop_attempts.csv").string()); !w)
     return failure(w.error());
   if (args.plots) drawPlots(**run, out);

@@ -115,6 +115,23 @@ Expected<RobotId> Bookkeeper::registerAgent(const Uuid& uuid, double now, const 
   return robot;
 }
 
+std::map<Uuid, Uuid> Bookkeeper::sealAsPrior() {
+  std::map<Uuid, Uuid> renamed;
+  robot_of_.clear();
+  for (AgentStats& a : agents_) {
+    const Uuid old = a.uuid;
+    a.uuid = agentUuid("prior:" + toString(old));  // another prior's prior agent: another uuid again
+    a.name = kPriorPrefix + (a.name.empty() ? toString(old) : a.name);
+    robot_of_[a.uuid] = a.robot;
+    renamed[old] = a.uuid;
+  }
+  return renamed;
+}
+
+bool Bookkeeper::isPrior(RobotId robot) const {
+  return robot < agents_.size() && agents_[robot].name.rfind(kPriorPrefix, 0) == 0;
+}
+
 std::optional<RobotId> Bookkeeper::robotOf(const Uuid& uuid) const {
   auto it = robot_of_.find(uuid);
   if (it == robot_of_.end()) return std::nullopt;

@@ -90,7 +90,8 @@ std::uint64_t checkpointNumber(const std::string& name) {
 
 Status CheckpointParams::read(const Config& c, const std::string& p) {
   for (Status s : {c.get(p + "checkpoint_dir", &dir), c.get(p + "checkpoint_period_s", &period_s),
-                   c.get(p + "checkpoint_keep", &keep)})
+                   c.get(p + "checkpoint_keep", &keep), c.get(p + "prior_map", &prior_map),
+                   c.get(p + "prior_map_optional", &prior_map_optional)})
     if (!s) return s;
   return validate();
 }
@@ -99,6 +100,8 @@ void CheckpointParams::write(ConfigWriter& w, const std::string& p) const {
   w.set(p + "checkpoint_dir", dir);
   w.set(p + "checkpoint_period_s", period_s);
   w.set(p + "checkpoint_keep", keep);
+  w.set(p + "prior_map", prior_map);
+  w.set(p + "prior_map_optional", prior_map_optional);
 }
 
 Status CheckpointParams::validate() const {
@@ -107,6 +110,18 @@ Status CheckpointParams::validate() const {
   if (keep < 2)
     return Error{"server.checkpoint_keep must be >= 2 (the previous good checkpoint is the "
                  "fallback), got " + std::to_string(keep)};
+  auto same = [](const std::string& a, const std::string& b) {
+    auto norm = [](const std::string& p) {
+      std::error_code ec;
+      std::string n = fs::weakly_canonical(fs::path(p), ec).lexically_normal().string();
+      while (n.size() > 1 && n.back() == '/') n.pop_back();
+      return n;
+    };
+    return norm(a) == norm(b);
+  };
+  if (!prior_map.empty() && !dir.empty() && same(prior_map, dir))
+    return Error{"server.prior_map '" + prior_map + "' is the server's own checkpoint_dir: the prior "
+                 "map would be overwritten; copy it elsewhere or checkpoint into another directory"};
   return Status::Ok();
 }
 
@@ -159,10 +174,10 @@ Expected<CheckpointStore> CheckpointStore::open(const CheckpointParams& params) 
   return store;
 }
 
-std::vector<std::string> CheckpointStore::checkpoints() const {
+std::vector<std::string> CheckpointStore::listCheckpoints(const std::string& dir) {
   std::vector<std::pair<std::uint64_t, std::string>> found;
   std::error_code ec;
-  for (const auto& e : fs::directory_iterator(params_.dir, ec))
+  for (const auto& e : fs::directory_iterator(dir, ec))
     if (const std::uint64_t n = checkpointNumber(e.path().filename().string()); n > 0)
       found.emplace_back(n, e.path().string());
   std::sort(found.rbegin(), found.rend());

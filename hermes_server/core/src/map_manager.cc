@@ -186,7 +186,15 @@ int MapManager::agentsMerged() const {
   int n = 0;
   if (!bookkeeper_) return 0;
   for (RobotId r : bookkeeper_->robots())
-    if (bookkeeper_->anchored(r)) ++n;
+    if (bookkeeper_->anchored(r) && !bookkeeper_->isPrior(r)) ++n;
+  return n;
+}
+
+int MapManager::priorAgents() const {
+  int n = 0;
+  if (!bookkeeper_) return 0;
+  for (RobotId r : bookkeeper_->robots())
+    if (bookkeeper_->isPrior(r)) ++n;
   return n;
 }
 

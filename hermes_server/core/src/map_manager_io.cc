@@ -105,5 +105,10 @@ Status MapManager::load(ByteReader* r) {
   return Status::Ok();
 }
 
+void MapManager::renameAgents(const std::map<Uuid, Uuid>& renamed) {
+  for (auto& [id, t] : map_.trajectories)
+    if (auto it = renamed.find(t.uuid); it != renamed.end()) t.uuid = it->second;
+}
+
 }  // namespace server
 }  // namespace hermes

@@ -51,7 +51,11 @@ Expected<std::unique_ptr<Server>> Server::create(const ServerParams& params,
   auto vocabulary = loadVocabulary(params.map.place_recognition, base_dir);
   if (!vocabulary) return Error{"server: " + vocabulary.error()};
   if (params.checkpoint.enabled()) return resume(params, *vocabulary, std::move(keyring));
-  return std::make_unique<Server>(params, *vocabulary, std::move(keyring));
+  ResumeReport report;
+  auto server = startOnPrior(params, *vocabulary, keyring, &report);
+  if (!server) return Error{server.error()};
+  (*server)->resume_ = std::move(report);
+  return server;
 }
 
 Server::Server(const ServerParams& params, std::shared_ptr<const Vocabulary> vocabulary,

@@ -7,6 +7,7 @@
 //                              frame as received (wire format, decoded again) },
 //   next handle, server counters, receiver counters, server timings,
 //   durability counters.
+// A prior map (server.h) is such a body, read from another directory.
 #include <chrono>
 
 #include "hermes/server/byte_codec.h"
@@ -141,6 +142,42 @@ Status Server::loadState(const std::vector<std::uint8_t>& body) {
   return Status::Ok();
 }
 
+Expected<std::unique_ptr<Server>> Server::startOnPrior(const ServerParams& params,
+                                                       std::shared_ptr<const Vocabulary> vocabulary,
+                                                       const std::optional<Keyring>& keyring,
+                                                       ResumeReport* report) {
+  const std::string& dir = params.checkpoint.prior_map;
+  if (dir.empty()) return std::make_unique<Server>(params, vocabulary, keyring);
+  std::string why;
+  const std::vector<std::string> files = CheckpointStore::listCheckpoints(dir);
+  if (files.empty()) why = "\n  it holds no server checkpoint (checkpoint-*.hck)";
+  for (const std::string& file : files) {  // newest first; nothing in the directory is changed
+    auto candidate = std::make_unique<Server>(params, vocabulary, keyring);
+    auto body = CheckpointStore::readCheckpoint(file);
+    Status s = body ? candidate->loadState(*body) : Status(Error{body.error()});
+    if (s) {
+      candidate->sealPrior();
+      report->prior_map = file;
+      if (!why.empty()) report->problems.push_back("server prior map: newer checkpoints refused:" + why);
+      return candidate;
+    }
+    why += "\n  " + file + ": " + s.error();
+  }
+  const std::string what = "server: prior map '" + dir + "' cannot be used:" + why;
+  if (!params.checkpoint.prior_map_optional)
+    return Error{what + "\n(server.prior_map_optional: true starts with an empty map instead)"};
+  report->problems.push_back(what + "\nstarting with an empty map (server.prior_map_optional)");
+  return std::make_unique<Server>(params, vocabulary, keyring);
+}
+
+void Server::sealPrior() {
+  map_.renameAgents(bookkeeper_.sealAsPrior());
+  // This mission's counts start at zero; the prior's map and world stay.
+  counters_ = ServerCounters{};
+  durability_ = DurabilityStats{};
+  receiver_.restoreStats(ReceiverStats{});
+}
+
 Expected<std::unique_ptr<Server>> Server::resume(const ServerParams& params,
                                                  std::shared_ptr<const Vocabulary> vocabulary,
                                                  const std::optional<Keyring>& keyring) {
@@ -168,7 +205,11 @@ Expected<std::unique_ptr<Server>> Server::resume(const ServerParams& params,
     return Error{"server: no usable checkpoint in " + params.checkpoint.dir +
                  " (move the directory away to start with an empty map):" + why};
   }
-  if (!server) server = std::make_unique<Server>(params, vocabulary, keyring);
+  if (!server) {  // nothing of this mission yet: on the prior map, if there is one
+    auto fresh = startOnPrior(params, vocabulary, keyring, &report);
+    if (!fresh) return Error{fresh.error()};
+    server = std::move(*fresh);
+  }
   server->store_ = std::move(*store);
   // Accepted (and acknowledged) after that checkpoint: queue them again.
   std::vector<SubmapHeader> covered;

@@ -41,7 +41,8 @@ struct LoopAccuracy {
 /// What merging gave: the one map the robots were placed in (the report's lead,
 /// metrics.json "global_map").
 struct MapSummary {
-  std::int64_t robots = 0;             ///< robots placed in the map's one world frame
+  std::int64_t robots = 0;             ///< robots of this run placed in the map's one world frame
+  std::int64_t prior_robots = 0;       ///< robots of the prior map the server started on (server.prior_map)
   std::int64_t keyframes = 0, landmarks = 0;
   std::int64_t loops_inter_robot = 0;  ///< accepted loops between two different robots
   double path_m = 0;                   ///< every placed robot's keyframe path in the map, summed [m]
@@ -77,6 +78,10 @@ RunResults evaluateRun(const OfflineRun& run);
 /// "loop_accuracy", "loops_per_pair", "warnings",
 /// and with checkpoints "server_durability" and "server_restarts" (durability_report.h).
 nlohmann::json resultsJson(const RunResults& results);
+
+/// The server's final state as a checkpoint in `dir` (emptied first): what a
+/// later run resumes on (--prior-map DIR, server.prior_map).
+Status saveMapToResume(const server::Server& server, const std::string& dir);
 
 /// Writes every file listed above except config_used.yaml. Errors name the file.
 Status writeRunResults(const OfflineRun& run, const RunResults& results, const std::string& out_dir);

@@ -161,6 +161,9 @@ struct AgentStats {
   int newRobotSessions() const;
 };
 
+/// Name prefix of the agents of a prior map (Bookkeeper::sealAsPrior).
+inline constexpr const char* kPriorPrefix = "prior/";
+
 /// Not thread-safe: the server's handler owns it and calls it from one thread.
 class Bookkeeper {
  public:
@@ -213,6 +216,14 @@ class Bookkeeper {
   /// "agent 1 (uuid ...)" for messages.
   std::string describe(RobotId robot) const;
 
+  /// A prior map (CheckpointParams::prior_map) was loaded: its agents become
+  /// "prior/<name>" with a uuid derived from theirs, so a robot of this mission
+  /// registers as a new robot even under the same name (its sessions and seqs
+  /// start again) and is placed in the prior's world frame by loops. Returns
+  /// old uuid -> new uuid.
+  std::map<Uuid, Uuid> sealAsPrior();
+  /// An agent of a prior map (its name, kept in checkpoints, says so).
+  bool isPrior(RobotId robot) const;
   /// Checkpoint (server_checkpoint.h): agents, sessions, accepted and applied seqs, world.
   void save(server::ByteWriter* w) const;
   /// Into a bookkeeper that has seen nothing yet; the error names what is damaged.

@@ -40,6 +40,14 @@ struct CheckpointParams {
   std::string dir;        ///< server.checkpoint_dir; empty = no checkpoints, nothing resumed
   double period_s = 0;    ///< server.checkpoint_period_s: at most this often (0 = after every merge) [s]
   int keep = 2;           ///< server.checkpoint_keep: newest checkpoints kept (>= 2)
+  /// server.prior_map: a directory holding a checkpoint of an earlier mission
+  /// (its newest usable one is read, nothing in it is changed): the server
+  /// starts on that map, in its world frame, unless `dir` already holds a
+  /// checkpoint of this mission (which holds the prior too). Empty = none.
+  std::string prior_map;
+  /// server.prior_map_optional: a prior map that cannot be read is a warning
+  /// and the server starts empty, instead of an error.
+  bool prior_map_optional = false;
   bool enabled() const { return !dir.empty(); }
   Status read(const Config& config, const std::string& prefix = "server.");
   void write(ConfigWriter& out, const std::string& prefix = "server.") const;
@@ -66,7 +74,9 @@ class CheckpointStore {
   /// Writes the next checkpoint and deletes the ones beyond `keep`. Returns its path.
   Expected<std::string> write(const std::vector<std::uint8_t>& body);
   /// Checkpoint files, newest first.
-  std::vector<std::string> checkpoints() const;
+  std::vector<std::string> checkpoints() const { return listCheckpoints(params_.dir); }
+  /// The checkpoint files of any directory, newest first (nothing is changed).
+  static std::vector<std::string> listCheckpoints(const std::string& dir);
   /// The body of a checkpoint file after checking magic, version, length and
   /// CRC; the error says what is wrong (the caller names the file).
   static Expected<std::vector<std::uint8_t>> readCheckpoint(const std::string& path);

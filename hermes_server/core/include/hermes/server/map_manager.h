@@ -252,9 +252,13 @@ class MapManager {
   /// Of the accepted, those bridging tie groups (group_bridge.h; latest PCM run).
   int loopsBridged() const { return loops_bridged_; }
   bool hasLoops(RobotId robot) const;
-  /// Agents (current sessions) anchored in the world frame (reads the
-  /// bookkeeper: with a bookkeeper lock, call with it held).
+  /// Agents (current sessions) anchored in the world frame, not counting a
+  /// prior map's (reads the bookkeeper: with a bookkeeper lock, call with it held).
   int agentsMerged() const;
+  /// Agents of the prior map the server started on (Bookkeeper::isPrior).
+  int priorAgents() const;
+  /// The trajectories' agent uuids after Bookkeeper::sealAsPrior (old -> new).
+  void renameAgents(const std::map<Uuid, Uuid>& renamed);
   /// Checkpoint (server_checkpoint.h): map, odometry chain, place database
   /// order, loop ids, world trajectory, solve counters, timings. The PCM cache
   /// is not kept (rebuilt on the next run, same verdicts).

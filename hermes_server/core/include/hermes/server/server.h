@@ -13,6 +13,16 @@
 // it. Agents resend what was never acknowledged; the restored bookkeeper drops
 // what it had already accepted: nothing lost, nothing applied twice.
 //
+// Prior map (server.prior_map, an earlier mission's checkpoint directory): a
+// server that has no checkpoint of its own yet starts on the newest usable
+// checkpoint there (read only), its agents renamed "prior/<name>"
+// (Bookkeeper::sealAsPrior): this mission's robots register anew and loops
+// place them in the prior's world frame. The prior's keyframes stay in the pose
+// graph with their odometry and loops (not frozen: a new loop may still move
+// them as far as their own edges allow; the gauge stays the world's first
+// keyframe). A prior that cannot be read is an error naming the files and why,
+// or with server.prior_map_optional a problem in resumeReport() and an empty start.
+//
 // Threads (server_worker.h runs process() on a thread of its own): onFrame()
 // may be called from one receiving thread while one other thread runs
 // process(). They share the intake state - bookkeeper, credibility queue,
@@ -92,6 +102,7 @@ struct ResumeReport {
   std::vector<std::string> problems; ///< refused files, each with its reason
   double load_ms = 0;                ///< wall time of reading and restoring [ms]
   std::size_t journal_replayed = 0, journal_covered = 0;
+  std::string prior_map;             ///< prior-map checkpoint the server started on (empty: none)
 };
 
 class Server {
@@ -181,6 +192,14 @@ class Server {
     ReceivedSubmap submap;
     std::vector<std::uint8_t> frame;  ///< as received (for checkpoints; empty if not via onFrame)
   };
+  /// A new server on params.checkpoint.prior_map (empty without one); its
+  /// problems go to `report`.
+  static Expected<std::unique_ptr<Server>> startOnPrior(const ServerParams& params,
+                                                        std::shared_ptr<const Vocabulary> vocabulary,
+                                                        const std::optional<Keyring>& keyring,
+                                                        ResumeReport* report);
+  /// The loaded state becomes the prior (see the top of this file).
+  void sealPrior();
   /// create() with a checkpoint directory.
   static Expected<std::unique_ptr<Server>> resume(const ServerParams& params,
                                                   std::shared_ptr<const Vocabulary> vocabulary,
