@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <tuple>
 
@@ -51,19 +50,11 @@ struct AssociationRow {
 /// associations.txt: `t depth t rgb` (ICL-NUIM) or `t rgb t depth` (TUM's associate.py),
 /// told apart by which file name holds "depth".
 Expected<std::vector<AssociationRow>> readAssociations(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return Error{"association list '" + path + "' cannot be opened"};
   std::vector<AssociationRow> rows;
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    const std::string t = trim(line);
-    if (t.empty() || t[0] == '#') continue;
+  Status s = forEachDataLine(path, "association list", [&](const std::string& t, const std::string& where) -> Status {
     std::istringstream ss(t);
     std::string s1, f1, s2, f2, extra;
     ss >> s1 >> f1 >> s2 >> f2;
-    const std::string where = path + ":" + std::to_string(lineno);
     double t1 = 0, t2 = 0;
     if (f2.empty() || (ss >> extra) || !parseDouble(s1, &t1) || !parseDouble(s2, &t2))
       return Error{where + ": expected 'stamp file stamp file'"};
@@ -75,7 +66,9 @@ Expected<std::vector<AssociationRow>> readAssociations(const std::string& path) 
     else r = {t1, t2, f1, f2};
     if (!rows.empty() && r.t_rgb <= rows.back().t_rgb) return Error{where + ": stamps must increase"};
     rows.push_back(std::move(r));
-  }
+    return Status::Ok();
+  });
+  if (!s) return Error{s.error()};
   if (rows.empty()) return Error{"association list '" + path + "' holds no rows"};
   return rows;
 }
