@@ -24,6 +24,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "hermes/core/value_stats.h"
 #include "hermes/distill/distiller.h"
 #include "hermes/distill/selectors.h"
 #include "hermes/distill/synthetic_window.h"
@@ -35,20 +36,6 @@ using json = nlohmann::json;
 
 namespace {
 
-json stats(std::vector<double> v) {
-  json j;
-  if (v.empty()) return j;
-  std::sort(v.begin(), v.end());
-  auto q = [&](double f) { return v[std::min(v.size() - 1, static_cast<std::size_t>(f * (v.size() - 1) + 0.5))]; };
-  double sum = 0;
-  for (double x : v) sum += x;
-  j["median"] = q(0.5);
-  j["p95"] = q(0.95);
-  j["max"] = v.back();
-  j["mean"] = sum / v.size();
-  j["n"] = v.size();
-  return j;
-}
 
 }  // namespace
 
@@ -173,23 +160,23 @@ int main(int argc, char** argv) {
   out["bench"] = "distill";
   out["windows"] = n_windows;
   out["sequences"] = sequences;
-  out["window_landmarks"] = stats(window_lms);
-  out["window_observations"] = stats(window_obs);
+  out["window_landmarks"] = distributionJson(window_lms);
+  out["window_observations"] = distributionJson(window_obs);
   out["target"] = "milp selection <= 50 ms median per 5-s window, one core";
   for (const std::string& s : strategies) {
     json j;
-    j["select_ms"] = stats(select_ms[s]);
-    j["distill_ms"] = stats(distill_ms[s]);
+    j["select_ms"] = distributionJson(select_ms[s]);
+    j["distill_ms"] = distributionJson(distill_ms[s]);
     j["status_counts"] = statuses[s];
     j["distill_status_counts"] = distill_statuses[s];
-    j["bytes_over_budget_ratio"] = stats(bytes_ratio[s]);
+    j["bytes_over_budget_ratio"] = distributionJson(bytes_ratio[s]);
     j["windows_over_budget"] = over_budget[s];
     j["windows_deferred"] = deferred[s];
-    if (s != "none") j["eq14_objective"] = stats(objective_ratio[s]);
+    if (s != "none") j["eq14_objective"] = distributionJson(objective_ratio[s]);
     out["strategies"][s] = j;
   }
-  out["milp_improvement_over_greedy"] = stats(milp_gap_vs_greedy);  // (greedy − milp) / greedy
-  out["milp_optimality_gap"] = stats(milp_bound_gap);  // (milp − CBC bound) / milp
+  out["milp_improvement_over_greedy"] = distributionJson(milp_gap_vs_greedy);  // (greedy − milp) / greedy
+  out["milp_optimality_gap"] = distributionJson(milp_bound_gap);  // (milp − CBC bound) / milp
   const std::string text = out.dump(2);
   std::printf("%s\n", text.c_str());
   if (!json_out.empty()) {

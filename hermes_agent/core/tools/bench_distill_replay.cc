@@ -23,6 +23,7 @@
 #include "hermes/agent/submap_window.h"
 #include "hermes/agent/tracking_log.h"
 #include "hermes/agent/window_step.h"
+#include "hermes/core/value_stats.h"
 #include "hermes/core/wire_format.h"
 #include "hermes/distill/distiller.h"
 #include "hermes_help/hermes_bench_distill_replay.h"  // tools/help/hermes_bench_distill_replay.txt
@@ -32,20 +33,6 @@ using json = nlohmann::json;
 
 namespace {
 
-json stats(std::vector<double> v) {
-  json j;
-  if (v.empty()) return j;
-  std::sort(v.begin(), v.end());
-  auto q = [&](double f) { return v[std::min(v.size() - 1, static_cast<std::size_t>(f * (v.size() - 1) + 0.5))]; };
-  double sum = 0;
-  for (double x : v) sum += x;
-  j["median"] = q(0.5);
-  j["p95"] = q(0.95);
-  j["max"] = v.back();
-  j["mean"] = sum / static_cast<double>(v.size());
-  j["n"] = v.size();
-  return j;
-}
 
 // FNV-1a 64 over what a distilled submap sends (ids, kept observations and keypoints).
 struct Digest {
@@ -233,12 +220,12 @@ int main(int argc, char** argv) {
       j["recording"] = path;
       j["rate_kBps"] = rate;
       j["windows"] = total.size();
-      j["distill_ms"] = stats(total);
-      j["distill_cpu_ms"] = stats(cpu);
-      j["trim_ms"] = stats(trim);
-      j["scores_ms"] = stats(scores);
-      j["select_ms"] = stats(select);
-      j["encode_ms"] = stats(encode);
+      j["distill_ms"] = distributionJson(total);
+      j["distill_cpu_ms"] = distributionJson(cpu);
+      j["trim_ms"] = distributionJson(trim);
+      j["scores_ms"] = distributionJson(scores);
+      j["select_ms"] = distributionJson(select);
+      j["encode_ms"] = distributionJson(encode);
       j["status_counts"] = statuses;
       j["digests"] = digests;
       j["per_window"] = windows;
@@ -247,8 +234,8 @@ int main(int argc, char** argv) {
                    total.size(), j["distill_ms"].value("median", 0.0));
     }
   }
-  out["distill_ms"] = stats(all_total);
-  out["distill_cpu_ms"] = stats(all_cpu);
+  out["distill_ms"] = distributionJson(all_total);
+  out["distill_cpu_ms"] = distributionJson(all_cpu);
   out["digest"] = hex(all_digest.h);
   out["target"] = "distill <= 50 ms median, <= 150 ms p95 per 5-s window, one core";
   const std::string text = out.dump(2);
