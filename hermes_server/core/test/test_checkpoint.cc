@@ -22,21 +22,8 @@ namespace server {
 namespace {
 
 namespace fs = std::filesystem;
-const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 
-const fixture::Fixture& hall() {
-  static const fixture::Fixture fx = [] {
-    std::vector<fixture::AgentSpec> specs = {
-        {kGt + "MH_01_easy.txt", 0.0, 15.0, -1},
-        {kGt + "MH_02_easy.txt", 0.0, 16.0, 8.0},  // a second session
-        {kGt + "MH_03_medium.txt", 0.0, 15.0, -1},
-    };
-    auto f = fixture::makeFixture(specs, fixture::Options{});
-    EXPECT_TRUE(f.ok()) << (f ? "" : f.error());
-    return f ? std::move(*f) : fixture::Fixture{};
-  }();
-  return fx;
-}
+const fixture::Fixture& hall() { return fixture::hallTrio(); }
 
 /// Frames in sending order (round robin over agents), with their times.
 std::vector<std::pair<double, const std::vector<std::uint8_t>*>> schedule() {

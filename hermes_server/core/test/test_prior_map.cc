@@ -1,6 +1,6 @@
 // A server started on a prior map (server.prior_map, server.h): mission 1's
-// robots MH_01 and MH_02 map the hall and the server's state is saved as a
-// checkpoint; mission 2's server starts on it. Its robots - MH_03, new, and
+// robots MH_01 and MH_02 (two sessions) map the hall (fixture::hallTrio) and
+// the server's state is saved as a checkpoint; mission 2's server starts on it. Its robots - MH_03, new, and
 // MH_01 again under the same name - register as new robots, are placed in
 // mission 1's world frame by loops against the prior map, and the prior's
 // keyframes stay. An unreadable prior map is an error naming the file (or,
@@ -23,21 +23,8 @@ namespace server {
 namespace {
 
 namespace fs = std::filesystem;
-const std::string kGt = std::string(HERMES_TRAJECTORY_DIR) + "/";
 
-const fixture::Fixture& hall() {
-  static const fixture::Fixture fx = [] {
-    std::vector<fixture::AgentSpec> specs = {
-        {kGt + "MH_01_easy.txt", 0.0, 15.0, -1},
-        {kGt + "MH_02_easy.txt", 0.0, 15.0, -1},
-        {kGt + "MH_03_medium.txt", 0.0, 15.0, -1},
-    };
-    auto f = fixture::makeFixture(specs, fixture::Options{});
-    EXPECT_TRUE(f.ok()) << (f ? "" : f.error());
-    return f ? std::move(*f) : fixture::Fixture{};
-  }();
-  return fx;
-}
+const fixture::Fixture& hall() { return fixture::hallTrio(); }
 
 std::string freshDir(const std::string& tag) {
   const std::string dir = ::testing::TempDir() + "/hermes_prior_" + tag;

@@ -1,5 +1,7 @@
 #include "multi_agent_fixture.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -206,6 +208,19 @@ Expected<Fixture> hallPair(double seconds, int keypoints) {
   options.keypoints = keypoints;
   return makeFixture({{gt + "MH_01_easy.txt", 0.0, seconds, -1}, {gt + "MH_02_easy.txt", 0.0, seconds, -1}},
                      options);
+}
+
+const Fixture& hallTrio() {
+  static const Fixture fx = [] {
+    const std::string gt = std::string(HERMES_TRAJECTORY_DIR) + "/";
+    auto f = makeFixture({{gt + "MH_01_easy.txt", 0.0, 15.0, -1},
+                          {gt + "MH_02_easy.txt", 0.0, 16.0, 8.0},  // a second session
+                          {gt + "MH_03_medium.txt", 0.0, 15.0, -1}},
+                         Options{});
+    EXPECT_TRUE(f.ok()) << (f ? "" : f.error());
+    return f ? std::move(*f) : Fixture{};
+  }();
+  return fx;
 }
 
 }  // namespace fixture

@@ -56,6 +56,10 @@ Expected<Fixture> makeFixture(const std::vector<AgentSpec>& specs, const Options
 /// config/trajectories) over their first `seconds`, `keypoints` per keyframe.
 Expected<Fixture> hallPair(double seconds, int keypoints);
 
+/// Three robots in one hall, built once: MH_01 over its first 15 s, MH_02 over
+/// 16 s with a second session from 8 s, MH_03 over 15 s (default options).
+const Fixture& hallTrio();
+
 /// The agents' frames round-robin (first of each, second of each, ...), as sent.
 std::vector<const std::vector<std::uint8_t>*> roundRobin(const Fixture& fx);
 
