@@ -17,7 +17,7 @@ using wire::putLE;
 
 constexpr std::uint8_t kPacketMagic[4] = {'H', 'M', 'D', 'N'};
 constexpr std::uint8_t kAckMagic[4] = {'H', 'M', 'D', 'A'};
-constexpr std::size_t kAckBytes = 4 + 16 + 8 + 4;
+constexpr std::size_t kAckBytes = 4 + 16 + 8 + 8 + 4;
 // Least bytes a keyframe / landmark can take (varints count 1): the decoder
 // checks counts against what is left before it allocates.
 constexpr std::size_t kMinKeyframeBytes = 3 + 8 + 7 * 8 + 1;
@@ -188,6 +188,7 @@ Expected<std::vector<std::uint8_t>> encodeMapDown(const MapDownPacket& p) {
   w.bytes(kPacketMagic, 4);
   w.le(kMapDownVersion, 1);
   w.bytes(p.agent.data(), p.agent.size());
+  w.le(p.epoch, 8);
   w.le(p.session, 4);
   w.le(p.seq, 8);
   w.pose(p.T_W_O);
@@ -215,7 +216,7 @@ Expected<std::vector<std::uint8_t>> encodeMapDown(const MapDownPacket& p) {
 
 Expected<MapDownPacket> decodeMapDown(const std::uint8_t* data, std::size_t size,
                                       const std::string& origin) {
-  if (Status s = checkFrame(data, size, kPacketMagic, 4 + 1 + 16 + 4 + 8 + 56 + 2 + 4, origin); !s)
+  if (Status s = checkFrame(data, size, kPacketMagic, 4 + 1 + 16 + 8 + 4 + 8 + 56 + 2 + 4, origin); !s)
     return Error{s.error()};
   try {
     Reader r(data + 4, size - 8, origin);
@@ -225,6 +226,7 @@ Expected<MapDownPacket> decodeMapDown(const std::uint8_t* data, std::size_t size
                    std::to_string(kMapDownVersion)};
     MapDownPacket p;
     r.bytes(p.agent.data(), p.agent.size(), "agent");
+    p.epoch = r.le(8, "epoch");
     p.session = static_cast<std::uint32_t>(r.le(4, "session"));
     p.seq = r.le(8, "seq");
     p.T_W_O = r.pose("T_W_O");
@@ -260,6 +262,7 @@ std::vector<std::uint8_t> encodeMapDownAck(const MapDownAck& ack) {
   Writer w;
   w.bytes(kAckMagic, 4);
   w.bytes(ack.agent.data(), ack.agent.size());
+  w.le(ack.epoch, 8);
   w.le(ack.seq, 8);
   sealCrc(&w.out);
   return std::move(w.out);
@@ -273,7 +276,8 @@ Expected<MapDownAck> decodeMapDownAck(const std::uint8_t* data, std::size_t size
                  std::to_string(kAckBytes)};
   MapDownAck ack;
   std::memcpy(ack.agent.data(), data + 4, 16);
-  ack.seq = getLE(data + 20, 8);
+  ack.epoch = getLE(data + 20, 8);
+  ack.seq = getLE(data + 28, 8);
   if (ack.seq == 0) return Error{origin + ": ack of seq 0"};
   return ack;
 }

@@ -18,6 +18,7 @@ MapDownPacket packet(std::uint64_t seed, int keyframes = 3, int landmarks = 40) 
   std::uniform_real_distribution<double> u(-20, 20);
   MapDownPacket p;
   p.agent = uuidFromSeed(seed);
+  p.epoch = 3;
   p.session = 2;
   p.seq = 7;
   p.T_W_O = SE3::exp((Vec6() << 1, -2, 0.5, 0.1, 0.2, -0.3).finished());
@@ -41,6 +42,7 @@ MapDownPacket packet(std::uint64_t seed, int keyframes = 3, int landmarks = 40) 
 
 void expectSame(const MapDownPacket& a, const MapDownPacket& b) {
   EXPECT_EQ(a.agent, b.agent);
+  EXPECT_EQ(a.epoch, b.epoch);
   EXPECT_EQ(a.session, b.session);
   EXPECT_EQ(a.seq, b.seq);
   EXPECT_LT((a.T_W_O.matrix() - b.T_W_O.matrix()).norm(), 1e-12);
@@ -78,11 +80,12 @@ TEST(MapDown, RoundTripsPacketsAndAcks) {
   auto big = encodeMapDown(packet(4, 1, 1000));
   ASSERT_TRUE(big.ok());
   EXPECT_LT(big->size(), 1000u * 56u);
-  const MapDownAck ack{uuidFromSeed(9), 42};
+  const MapDownAck ack{uuidFromSeed(9), 5, 42};
   const auto ab = encodeMapDownAck(ack);
   auto back = decodeMapDownAck(ab.data(), ab.size());
   ASSERT_TRUE(back.ok()) << back.error();
   EXPECT_EQ(back->agent, ack.agent);
+  EXPECT_EQ(back->epoch, 5u);
   EXPECT_EQ(back->seq, 42u);
 }
 
@@ -116,7 +119,7 @@ TEST(MapDown, RefusesCorruptedTruncatedAndForeignFrames) {
   reseal(&other);
   EXPECT_NE(decodeMapDown(other.data(), other.size()).error().find("version 9, this build reads 1"),
             std::string::npos);
-  auto ack = encodeMapDownAck({uuidFromSeed(1), 3});
+  auto ack = encodeMapDownAck({uuidFromSeed(1), 1, 3});
   EXPECT_NE(decodeMapDown(ack.data(), ack.size()).error().find("magic"), std::string::npos);
   EXPECT_FALSE(decodeMapDown(nullptr, 0).ok());
   ack[25] ^= 1;

@@ -17,6 +17,7 @@ Status ServerParams::read(const Config& config, const std::string& prefix) {
   if (Status s = auth.read(config, prefix + "auth."); !s) return s;
   if (Status s = queue.read(config, prefix + "queue."); !s) return s;
   if (Status s = checkpoint.read(config, prefix); !s) return s;
+  if (Status s = downlink.read(config, prefix + "downlink."); !s) return s;
   return validate();
 }
 
@@ -28,11 +29,12 @@ void ServerParams::write(ConfigWriter& out, const std::string& prefix) const {
   auth.write(out, prefix + "auth.");
   queue.write(out, prefix + "queue.");
   checkpoint.write(out, prefix);
+  downlink.write(out, prefix + "downlink.");
 }
 
 Status ServerParams::validate() const {
   for (Status s : {bookkeeper.validate(), credibility.validate(), map.validate(), auth.validate(),
-                   queue.validate(), checkpoint.validate()})
+                   queue.validate(), checkpoint.validate(), downlink.validate()})
     if (!s) return s;
   return Status::Ok();
 }

@@ -5,10 +5,11 @@
 // in the receiving robot's odometry frame O of the session the packet names,
 // and the packet carries world <- O, so the robot holds them in the world frame
 // and can place a later session of its own there (agent/borrowed_map.h).
-// Packets are numbered per robot from 1 and acknowledged by number: the server
-// resends an unacknowledged packet as it was, the robot takes each number once.
+// Packets are numbered per robot from 1 within the server's downlink epoch (a
+// new one at every server start) and acknowledged by (epoch, number): the
+// server resends an unacknowledged packet as it was, the robot takes each once.
 //
-// Binary frame: "HMDN", version 1, the receiving robot's uuid, session, seq,
+// Binary frame: "HMDN", version 1, the receiving robot's uuid, epoch, session, seq,
 // T_W_O (7 doubles), the keyframes (origin key as varints, stamp, T_O_C, the
 // indices of the packet's landmarks it sees, delta-coded), the landmarks
 // (origin key, p_O as three floats, descriptor), CRC-32 of everything before.
@@ -43,6 +44,7 @@ struct BorrowedLandmark {
 
 struct MapDownPacket {
   Uuid agent{};                ///< the receiving robot
+  std::uint64_t epoch = 0;     ///< the server start that numbered it
   std::uint32_t session = 0;   ///< its session whose odometry frame O the poses are in
   std::uint64_t seq = 0;       ///< per robot, from 1
   SE3 T_W_O;                   ///< world <- O when the packet was planned
@@ -57,6 +59,7 @@ struct MapDownPacket {
 /// The receiver's acknowledgement of packet `seq` (it holds what it carried).
 struct MapDownAck {
   Uuid agent{};
+  std::uint64_t epoch = 0;
   std::uint64_t seq = 0;
 };
 
@@ -68,7 +71,7 @@ Expected<std::vector<std::uint8_t>> encodeMapDown(const MapDownPacket& packet);
 Expected<MapDownPacket> decodeMapDown(const std::uint8_t* data, std::size_t size,
                                       const std::string& origin = "map_down");
 
-/// Ack frame: "HMDA", the uuid, seq, CRC-32 (32 bytes).
+/// Ack frame: "HMDA", the uuid, epoch, seq, CRC-32 (40 bytes).
 std::vector<std::uint8_t> encodeMapDownAck(const MapDownAck& ack);
 Expected<MapDownAck> decodeMapDownAck(const std::uint8_t* data, std::size_t size,
                                       const std::string& origin = "map_down_ack");

@@ -55,6 +55,7 @@
 #include "hermes/server/bookkeeper.h"
 #include "hermes/server/checkpoint_store.h"
 #include "hermes/server/credibility.h"
+#include "hermes/server/downlink.h"
 #include "hermes/server/map_manager.h"
 #include "hermes/server/submap_receiver.h"
 
@@ -68,6 +69,7 @@ struct ServerParams {
   AuthParams auth;                ///< server.auth.*
   QueueParams queue;              ///< server.queue.*
   CheckpointParams checkpoint;    ///< server.checkpoint_dir, server.checkpoint_period_s, ...
+  DownlinkParams downlink;        ///< server.downlink.* (used by the caller's Downlink)
   Status read(const Config& config, const std::string& prefix = "server.");
   Status validate() const;
   void write(ConfigWriter& out, const std::string& prefix = "server.") const;
