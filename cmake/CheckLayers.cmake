@@ -1,7 +1,8 @@
 # ctest "libraries_include_only_layers_below": a library includes headers of the
 # libraries below it and of none beside or above it (tests and tools may reach
 # further: they exercise both ends). The layers:
-#   core (src) <- distill <- agent core;  core <- server core;  core <- transport;
+#   core (src) <- distill <- agent core;  core <- distill <- server core (the
+#   downlink ranks landmarks with the uplink's scores);  core <- transport;
 #   system (offline runner) and the ROS packages sit on top. Run as
 #   cmake -DROOT=<source dir> -P cmake/CheckLayers.cmake
 set(found "")

@@ -61,6 +61,11 @@ Expected<std::unique_ptr<OfflineRun>> OfflineRun::create(const SystemParams& par
   run->link_ = std::make_unique<SharedLink>(*trace, static_cast<int>(agents.size()),
                                             static_cast<std::uint64_t>(params.link.seed),
                                             static_cast<std::size_t>(params.link.packet_bytes));
+  if (params.link.scenario.empty() && run->params_.server.downlink.enabled)
+    run->downlink_ = std::make_unique<DownlinkChannel>(
+        run->params_.server.downlink, *trace, static_cast<int>(agents.size()),
+        static_cast<std::uint64_t>(params.link.seed) ^ 0x9e3779b97f4a7c15ull,
+        static_cast<std::size_t>(params.link.packet_bytes));
   run->last_transmitted_.assign(agents.size(), 0);
   for (std::size_t i = 0; i < agents.size(); ++i) {
     AgentSource& src = agents[i];
@@ -328,6 +333,27 @@ void OfflineRun::sendGlobalPoses(double t) {
       if (agents_[i].robot == robot) globals_.push_back({t + s.latency_ms * 1e-3, i, update});
 }
 
+void OfflineRun::sendDownlink(double t) {
+  std::vector<server::DownlinkRecipient> recipients;
+  std::vector<std::size_t> agent_of;
+  for (std::size_t i = 0; i < agents_.size(); ++i) {
+    const OfflineAgent& a = agents_[i];
+    if (!a.robot || a.landed) continue;
+    recipients.push_back({*a.robot, a.pipeline->agentId(), a.pipeline->session()});
+    agent_of.push_back(i);
+  }
+  downlink_->send(server_->map(), recipients, agent_of, t);
+}
+
+void OfflineRun::receiveDownlink(double t) {
+  downlink_->advance(t, server_ != nullptr,
+                     [&](std::size_t i, const std::vector<std::uint8_t>& bytes) -> std::optional<MapDownAck> {
+                       auto ack = agents_[i].pipeline->onMapDown(bytes.data(), bytes.size(), t);
+                       if (!ack) return std::nullopt;
+                       return *ack;
+                     });
+}
+
 void OfflineRun::transmit(std::size_t i, std::uint32_t session, std::uint64_t seq,
                           const std::vector<std::uint8_t>& frame) {
   OfflineAgent& sender = agents_[i];
@@ -459,6 +485,7 @@ Status OfflineRun::restartServer(double t) {
   auto server = server::Server::create(params_.server, base_dir_);
   if (!server) return Error{"server restart at " + std::to_string(t) + " s: " + server.error()};
   server_ = std::move(*server);
+  if (downlink_) downlink_->newEpoch(restarts_.size() + 1);
   ServerRestart& r = restarts_.back();
   r.up_at_s = t;
   r.resume_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -558,12 +585,14 @@ Status OfflineRun::run(const std::function<void(const ProgressInfo&)>& progress)
     if (Status s = resetAgents(t); !s) return s;
     deliver(t);
     acknowledge(t);
+    if (downlink_) receiveDownlink(t);
     for (OfflineAgent& a : agents_) a.pipeline->pollUplink(t);
     if (network_) network_->poll(t, c.server_period_s);
     if (Status s = feedDueFrames(t); !s) return s;
     retryCarriedWindows(t);
     if (server_ && t + 1e-9 >= next_server_) {
       if (server_->process(t) > 0) sendGlobalPoses(t);
+      if (downlink_) sendDownlink(t);
       next_server_ += c.server_period_s;
     }
     while (t + 1e-9 >= next_sample_ + c.sample_period_s) {

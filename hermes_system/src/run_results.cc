@@ -261,6 +261,9 @@ RunResults evaluateRun(const OfflineRun& run) {
       am.submaps_sent = am.submaps_sent.value_or(0) + r.submaps_sent_before;
     }
     bytes_total += *am.bytes;
+    if (run.downlink())
+      am.downlink_bytes = static_cast<std::int64_t>(
+          run.downlink()->bytesTo(static_cast<std::size_t>(&a - run.agents().data())));
     am.submaps_applied = 0;
     if (a.robot) {
       if (const AgentStats* st = srv.bookkeeper().stats(*a.robot))
@@ -570,6 +573,17 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
   if (res.raw_streaming_bytes > 0) {
     std::snprintf(buf, sizeof buf, "            %.0f %% of the %.1f MB raw streaming of the same maps would send\n",
                   100.0 * sent_mb * 1e6 / double(res.raw_streaming_bytes), double(res.raw_streaming_bytes) / 1e6);
+    o << buf;
+  }
+  if (run.downlink()) {  // the map back to the robots (server.downlink)
+    std::int64_t down = 0, placed = 0;
+    for (const AgentMetrics& a : m.per_agent) {
+      down += a.downlink_bytes.value_or(0);
+      placed += a.borrowed_relocalisations.value_or(0);
+    }
+    std::snprintf(buf, sizeof buf,
+                  "  received  %.1f kB of the map back (%.0f B/s per robot at most); %lld session(s) placed by it\n",
+                  double(down) / 1e3, run.params().server.downlink.bytes_per_s, ll(placed));
     o << buf;
   }
   if (res.camera_bytes > 0) {

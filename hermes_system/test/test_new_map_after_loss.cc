@@ -121,6 +121,74 @@ TEST(NewMapAfterLoss, DarkStretchStartsANewSessionThatLoopsTie) {
     }
 }
 
+// The same dark stretch on the other robot, MH_01, whose path after it runs
+// through what MH_02 mapped: the server's downlink has sent MH_01 the map
+// around it (borrowed map), so its new session is placed in the world at its
+// first keyframe, before any loop; without the downlink its own idea of where
+// it is stays off by its motion in the dark until the server re-localises it.
+TEST(NewMapAfterLoss, TheBorrowedMapPlacesTheNewSessionAtOnce) {
+  const std::string victim = "MH_01_easy";
+  double dark_end = 0;
+  const std::string dir = darkenedCopy(test_support::renderedMeeting(), test_support::meetingSequences(),
+                                       victim, 12.0, 14.0, "meeting_borrowed", &dark_end);
+  ASSERT_FALSE(dir.empty());
+  struct Outcome {
+    agent::AgentPipeline::SessionPlacement fresh;
+    agent::AgentPipeline::BorrowedStats borrowed;
+    double global_rmse_m = 1e9;
+    std::int64_t down_bytes = 0;
+    double seconds = 0;
+  };
+  auto fly = [&](bool downlink) {
+    Outcome o;
+    system::SystemParams params = test_support::testRunParams();
+    params.server.downlink.enabled = downlink;
+    auto run = test_support::makeRunOn(params, dir, test_support::meetingSequences(),
+                                       downlink ? "borrowed_on" : "borrowed_off");
+    EXPECT_TRUE(run);
+    if (!run) return o;
+    EXPECT_TRUE(run->run());
+    const system::RunResults r = system::evaluateRun(*run);
+    std::printf("%s", system::formatReport(*run, r).c_str());
+    const system::OfflineAgent* a = agentNamed(*run, victim);
+    EXPECT_TRUE(a);
+    if (!a) return o;
+    EXPECT_EQ(a->pipeline->newMaps(), 1);
+    const auto placements = a->pipeline->placements();
+    EXPECT_EQ(placements.size(), 2u);
+    if (!placements.empty()) o.fresh = placements.back();
+    o.borrowed = a->pipeline->borrowedStats();
+    o.seconds = run->simTime();
+    for (const AgentMetrics& m : r.metrics.per_agent)
+      if (m.agent == victim) {
+        o.global_rmse_m = m.global_pose_rmse_m.value_or(1e9);
+        o.down_bytes = m.downlink_bytes.value_or(0);
+      }
+    return o;
+  };
+  const Outcome with = fly(true), without = fly(false);
+  const auto placedAfter = [](const Outcome& o) {
+    return o.fresh.placed < 0 ? 1e9 : o.fresh.placed - o.fresh.started;
+  };
+  std::printf("new session placed %.2f s after it began with the downlink (%s), %.2f s without;\n"
+              "own global pose %.1f cm RMSE with, %.1f cm without; borrowed: %zu landmarks, %zu kB held, "
+              "%lld attempt(s); downlink %.1f kB\n",
+              placedAfter(with), with.fresh.by_borrowed ? "borrowed map" : "server", placedAfter(without),
+              with.global_rmse_m * 100, without.global_rmse_m * 100, with.borrowed.landmarks,
+              with.borrowed.memory_bytes / 1000, (long long)with.borrowed.attempts, with.down_bytes / 1e3);
+  EXPECT_TRUE(with.fresh.by_borrowed);
+  EXPECT_EQ(with.borrowed.relocalisations, 1);
+  EXPECT_LE(placedAfter(with), 1.5);
+  EXPECT_FALSE(without.fresh.by_borrowed);
+  EXPECT_GT(placedAfter(without), placedAfter(with) + 1.0);
+  EXPECT_LT(with.global_rmse_m, 0.05);
+  EXPECT_LT(with.global_rmse_m, 0.5 * without.global_rmse_m);
+  EXPECT_EQ(without.down_bytes, 0);
+  const system::SystemParams defaults = test_support::testRunParams();
+  EXPECT_LE(static_cast<double>(with.down_bytes),
+            defaults.server.downlink.bytes_per_s * (with.seconds + defaults.server.downlink.burst_s));
+}
+
 TEST(NewMapAfterLoss, ANewSessionThatNeverMeetsTheMapIsReportedApart) {
   system::SystemParams params = test_support::testRunParams();
   params.run.agent.setWindowPeriod(2.5);  // windows of the new session before the end

@@ -112,6 +112,10 @@ void to_json(json& j, const AgentMetrics& m) {
   if (m.reported_new) j["reported_new"] = *m.reported_new;
   if (m.frames_skipped) j["frames_skipped"] = *m.frames_skipped;
   if (m.new_maps) j["new_maps"] = *m.new_maps;
+  if (m.borrowed_relocalisations) j["borrowed_relocalisations"] = *m.borrowed_relocalisations;
+  if (m.borrowed_landmarks) j["borrowed_landmarks"] = *m.borrowed_landmarks;
+  if (m.borrowed_memory_bytes) j["borrowed_memory_bytes"] = *m.borrowed_memory_bytes;
+  if (m.downlink_bytes) j["downlink_bytes"] = *m.downlink_bytes;
   if (!m.frames_skipped_causes.empty()) j["frames_skipped_causes"] = m.frames_skipped_causes;
 }
 
@@ -302,6 +306,10 @@ AgentMetrics parseAgent(const json& j, const std::string& where) {
   a.reported_new = r.integer("reported_new", false);
   a.frames_skipped = r.integer("frames_skipped", false);
   a.new_maps = r.integer("new_maps", false);
+  a.borrowed_relocalisations = r.integer("borrowed_relocalisations", false);
+  a.borrowed_landmarks = r.integer("borrowed_landmarks", false);
+  a.borrowed_memory_bytes = r.integer("borrowed_memory_bytes", false);
+  a.downlink_bytes = r.integer("downlink_bytes", false);
   a.frames_skipped_causes = r.counts("frames_skipped_causes");
   return a;
 }

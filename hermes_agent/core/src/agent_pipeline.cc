@@ -48,6 +48,11 @@ AgentPipeline::AgentPipeline(const AgentPipelineParams& params, const std::strin
       window_(tracker_, params.tracker.window),
       live_(tracker_, window_, T_C_B_),
       distiller_(std::move(distiller)),
+      borrowed_([&] {
+        BorrowedMapParams b = params.borrowed;
+        b.octave_scale = params.tracker.orb.scale_factor;
+        return b;
+      }()),
       monitor_(params.uplink.monitor),
       timings_(static_cast<std::size_t>(params.threads.timing_window)),
       stage_timings_(static_cast<std::size_t>(params.threads.timing_window)) {
@@ -129,7 +134,80 @@ Status AgentPipeline::attachUplink(UplinkSender::Transport transport, double clo
 
 bool AgentPipeline::onGlobalPose(const GlobalPoseUpdate& update, double now) {
   std::lock_guard<std::mutex> lock(global_mu_);
-  return global_pose_.update(update, session_, now);
+  if (!global_pose_.update(update, session_, now)) return false;
+  if (!placements_.empty() && placements_.back().session == update.session &&
+      placements_.back().placed < 0)
+    placements_.back().placed = now;
+  return true;
+}
+
+double AgentPipeline::uplinkTime(double stamp) const {
+  std::lock_guard<std::mutex> lock(uplink_mu_);
+  return uplink_clock_ ? uplink_clock_() : stamp - clock_offset_;
+}
+
+Expected<MapDownAck> AgentPipeline::onMapDown(const std::uint8_t* data, std::size_t size, double now) {
+  (void)now;
+  auto packet = decodeMapDown(data, size, "agent " + name_ + " map_down");
+  if (!packet) return Error{packet.error()};
+  std::string why;
+  IngestResult r;
+  {
+    std::lock_guard<std::mutex> lock(borrowed_mu_);
+    r = borrowed_.ingest(*packet, agent_id_, &why);
+  }
+  if (r == IngestResult::kRefused) return Error{"agent " + name_ + " map_down: " + why};
+  return MapDownAck{agent_id_, packet->epoch, packet->seq};
+}
+
+AgentPipeline::BorrowedStats AgentPipeline::borrowedStats() const {
+  std::lock_guard<std::mutex> lock(borrowed_mu_);
+  BorrowedStats s;
+  s.packets = borrowed_.packetsTaken();
+  s.duplicates = borrowed_.duplicates();
+  s.refused = borrowed_.refused();
+  s.keyframes = borrowed_.keyframes();
+  s.landmarks = borrowed_.landmarks();
+  s.memory_bytes = borrowed_.memoryBytes();
+  s.attempts = borrowed_attempts_;
+  s.relocalisations = borrowed_relocalisations_;
+  return s;
+}
+
+void AgentPipeline::placeByBorrowedMap(double stamp) {
+  const std::vector<Keyframe>& kfs = tracker_.keyframes();
+  if (kfs.empty()) return;
+  const Keyframe& kf = kfs.back();
+  std::optional<SE3> T_W_C;
+  {
+    std::lock_guard<std::mutex> lock(global_mu_);
+    const auto& held = global_pose_.latest();
+    if (held && held->session == session_) T_W_C = global_pose_.inWorld(kf.T_A_C);
+  }
+  std::lock_guard<std::mutex> lock(borrowed_mu_);
+  if (T_W_C) {  // placed: the borrowed map keeps what lies around the robot
+    borrowed_.setRobotPosition(T_W_C->translation());
+    return;
+  }
+  if (borrowed_.landmarks() == 0) return;
+  const auto t0 = std::chrono::steady_clock::now();
+  ++borrowed_attempts_;
+  auto r = borrowed_.relocalise(kf.keypoints, kf.descriptors, camera_.K, camera_.baseline,
+                                params_.tracker.pose);
+  timings_.add("borrowed_relocalise", msSince(t0));
+  if (!r) return;
+  GlobalPoseUpdate u;
+  u.session = session_;
+  u.keyframe_stamp = kf.stamp;
+  u.T_W_O = r->T_W_C * kf.T_A_C.inverse();
+  const double now = uplinkTime(stamp);
+  std::lock_guard<std::mutex> glock(global_mu_);
+  if (!global_pose_.update(u, session_, now)) return;
+  ++borrowed_relocalisations_;
+  if (!placements_.empty() && placements_.back().session == session_ && placements_.back().placed < 0) {
+    placements_.back().placed = now;
+    placements_.back().by_borrowed = true;
+  }
 }
 
 Status AgentPipeline::onAck(std::uint32_t session, std::uint64_t seq, double now) {
@@ -185,6 +263,7 @@ Expected<FrontStep> AgentPipeline::trackStep(const CameraFrame* frame, double st
   const auto t0 = std::chrono::steady_clock::now();
   auto step = front_->track(frame, stamp);
   if (frame) timings_.add("track", msSince(t0));
+
   if (!step.ok()) return Error{"agent " + name_ + ": " + step.error()};
   last_stamp_ = stamp;
   ++frames_;
@@ -199,10 +278,22 @@ Expected<FrontStep> AgentPipeline::trackStep(const CameraFrame* frame, double st
       if (!step.ok()) return Error{"agent " + name_ + ": " + step.error()};
     }
   }
-  if (step->result.status == TrackingStatus::kOk)
+  bool new_session;
+  {
+    std::lock_guard<std::mutex> lock(global_mu_);
+    new_session = placements_.empty() || placements_.back().session != session_;
+  }
+  if (new_session) {  // (the uplink clock only then: its lock may wait on a send)
+    const double now = uplinkTime(stamp);
+    std::lock_guard<std::mutex> lock(global_mu_);
+    placements_.push_back({session_, now});
+  }
+  if (step->result.status == TrackingStatus::kOk) {
     trajectory_.push_back(StampedPose{stamp, step->T_W_B});
-  else
+    if (step->result.new_keyframe && frame) placeByBorrowedMap(stamp);
+  } else {
     ++lost_;
+  }
   const auto t1 = std::chrono::steady_clock::now();
   if (window_worker_)
     queueWindowStep(stamp, stamp);
@@ -392,6 +483,10 @@ AgentMetrics AgentPipeline::metrics() const {
   m.weak_frames = tracked.total_health.weak;
   m.trouble_windows = w.trouble;
   m.new_maps = new_maps_;
+  const BorrowedStats b = borrowedStats();
+  m.borrowed_relocalisations = b.relocalisations;
+  m.borrowed_landmarks = static_cast<std::int64_t>(b.landmarks);
+  m.borrowed_memory_bytes = static_cast<std::int64_t>(b.memory_bytes);
   return m;
 }
 

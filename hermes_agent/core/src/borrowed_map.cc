@@ -16,8 +16,7 @@ Status BorrowedMapParams::read(const Config& c, const std::string& p) {
     if (!s) return s;
   }
   for (auto [key, ptr] : {std::pair<const char*, double*>{"ratio", &ratio},
-                          {"search_radius_m", &search_radius_m},
-                          {"octave_scale", &octave_scale}}) {
+                          {"search_radius_m", &search_radius_m}}) {
     Status s = c.get(p + "." + key, ptr);
     if (!s) return s;
   }
@@ -30,7 +29,6 @@ void BorrowedMapParams::write(ConfigWriter* w, const std::string& p) const {
   w->set(p + ".ratio", ratio);
   w->set(p + ".min_inliers", min_inliers);
   w->set(p + ".search_radius_m", search_radius_m);
-  w->set(p + ".octave_scale", octave_scale);
 }
 
 Status BorrowedMapParams::validate() const {

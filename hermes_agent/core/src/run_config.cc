@@ -8,6 +8,7 @@ Status AgentPipelineParams::read(const Config& config) {
   distill.window_s = tracker.window.period_s;  // one key for the window cut and Δt of Eq. 17
   if (Status s = uplink.read(config); !s) return s;
   if (Status s = threads.read(config); !s) return s;
+  if (Status s = borrowed.read(config); !s) return s;
   return validate();
 }
 
@@ -19,6 +20,7 @@ Status AgentPipelineParams::validate() const {
                  std::to_string(tracker.window.period_s) + " s: they must be equal (window.period_s sets both)"};
   if (Status s = distill.validate(); !s) return s;
   if (Status s = threads.validate(); !s) return s;
+  if (Status s = borrowed.validate(); !s) return s;
   return uplink.validate();
 }
 
@@ -27,6 +29,7 @@ void AgentPipelineParams::write(ConfigWriter* out) const {
   distill.write(out);
   uplink.write(*out);
   threads.write(out);
+  borrowed.write(out);
 }
 
 Status RunParams::read(const Config& config) {

@@ -136,7 +136,7 @@ void expectNear(const SE3& a, const SE3& b, double max_m, double max_deg) {
 TEST(BorrowedMapParams, ReadWriteValidate) {
   auto cfg = Config::fromString(
       "borrowed:\n  max_landmarks: 1000\n  max_hamming: 40\n  ratio: 0.7\n  min_inliers: 30\n"
-      "  search_radius_m: 8.5\n  octave_scale: 1.25\n",
+      "  search_radius_m: 8.5\n",
       "b.yaml");
   ASSERT_TRUE(cfg.ok()) << cfg.error();
   BorrowedMapParams p;
@@ -146,12 +146,11 @@ TEST(BorrowedMapParams, ReadWriteValidate) {
   EXPECT_DOUBLE_EQ(p.ratio, 0.7);
   EXPECT_EQ(p.min_inliers, 30);
   EXPECT_DOUBLE_EQ(p.search_radius_m, 8.5);
-  EXPECT_DOUBLE_EQ(p.octave_scale, 1.25);
   EXPECT_TRUE(cfg->unusedKeys().empty());
 
   ConfigWriter w;
   p.write(&w);
-  EXPECT_EQ(w.values().size(), 6u);
+  EXPECT_EQ(w.values().size(), 5u);
   auto back = Config::fromString(w.yaml(), "written");
   ASSERT_TRUE(back.ok()) << back.error();
   BorrowedMapParams q;

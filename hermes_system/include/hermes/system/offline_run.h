@@ -13,7 +13,9 @@
 //   acks due -> AgentPipeline::onAck (frees the spool, feeds the bandwidth monitor)
 //   frames due (in time order over agents) -> AgentPipeline::feed -> windows ->
 //     distill (budget from the monitor) -> encode -> spool -> transport -> link.send
-//   every server_period_s: Server::process (credibility order, merge, loops, graph)
+//   every server_period_s: Server::process (credibility order, merge, loops, graph),
+//     then the downlink (downlink_channel.h): packets of the map around each placed
+//     robot over a link of their own -> AgentPipeline::onMapDown -> ack back
 // After the last frame the link runs on for at most drain_s so the backlog arrives.
 //
 // Agents side by side (system.agent_threads): within one clock step the agents
@@ -72,6 +74,7 @@
 #include "hermes/core/bandwidth_log.h"
 #include "hermes/core/dataset.h"
 #include "hermes/core/emulated_link.h"
+#include "hermes/system/downlink_channel.h"
 #include "hermes/system/relay_network.h"
 #include "hermes/system/system_params.h"
 
@@ -219,6 +222,8 @@ class OfflineRun {
   const std::vector<ServerRestart>& restarts() const { return restarts_; }
   /// The shared link (runs without a scenario; unused with one).
   const SharedLink& link() const { return *link_; }
+  /// The server's downlink to the robots (null with server.downlink.enabled false or a scenario).
+  const DownlinkChannel* downlink() const { return downlink_.get(); }
   /// The scenario's network (null without link.scenario).
   const RelayNetwork* network() const { return network_.get(); }
   const std::vector<BandwidthSample>& bandwidth() const { return bandwidth_; }
@@ -283,6 +288,10 @@ class OfflineRun {
   };
   /// After a merge: every anchored robot's world <- odom goes down the link.
   void sendGlobalPoses(double t);
+  /// Every server period: the downlink's packets for the placed robots (downlink_channel.h).
+  void sendDownlink(double t);
+  /// Downlink packets and acknowledgements due by t.
+  void receiveDownlink(double t);
   struct MessageKey {
     std::size_t agent;
     std::uint32_t session;
@@ -292,6 +301,7 @@ class OfflineRun {
   SystemParams params_;
   std::unique_ptr<SharedLink> link_;
   std::unique_ptr<RelayNetwork> network_;
+  std::unique_ptr<DownlinkChannel> downlink_;  ///< server.downlink (runs without a scenario)
   std::vector<double> last_own_bytes_;  ///< scenario runs: per agent, at the last sample
   std::unique_ptr<server::Server> server_;
   std::vector<OfflineAgent> agents_;

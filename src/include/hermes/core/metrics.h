@@ -103,6 +103,11 @@ struct AgentMetrics {
   std::optional<int64_t> frames_skipped;
   /// Agent: new maps started after tracking was lost for tracker.reinit_after_s.
   std::optional<int64_t> new_maps;
+  /// Agent: the borrowed map (the server's downlink): sessions it placed in
+  /// the world by relocalisation, landmarks held at the end, their memory [B];
+  /// and the downlink's bytes to this robot, resends included [B].
+  std::optional<int64_t> borrowed_relocalisations, borrowed_landmarks, borrowed_memory_bytes;
+  std::optional<int64_t> downlink_bytes;
   std::map<std::string, int64_t> frames_skipped_causes;
 };
 

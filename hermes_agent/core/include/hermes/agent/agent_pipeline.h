@@ -52,6 +52,7 @@
 
 #include "hermes/agent/agent_threads.h"
 #include "hermes/agent/bandwidth_monitor.h"
+#include "hermes/agent/borrowed_map.h"
 #include "hermes/agent/run_config.h"
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/tracking_front.h"
@@ -59,6 +60,7 @@
 #include "hermes/agent/window_cut.h"
 #include "hermes/agent/window_step.h"
 #include "hermes/core/global_pose.h"
+#include "hermes/core/map_down.h"
 #include "hermes/core/metrics.h"
 #include "hermes/core/trajectory.h"
 #include "hermes/distill/distiller.h"
@@ -213,6 +215,33 @@ class AgentPipeline {
     return global_pose_;
   }
 
+  /// A downlink packet (core/map_down.h) at `now`: kept in the borrowed map
+  /// (borrowed_map.h); the acknowledgement to send back when the robot holds
+  /// it (taken now or before), an error naming why it was refused (malformed,
+  /// for another robot). Any thread. While the current session is not placed
+  /// in the world, each new keyframe is relocalised against the borrowed map
+  /// (live tracking only): a success places the session at once (globalPose()).
+  /// Nothing borrowed enters the robot's own map or its submaps.
+  Expected<MapDownAck> onMapDown(const std::uint8_t* data, std::size_t size, double now);
+  struct BorrowedStats {
+    std::uint64_t packets = 0, duplicates = 0, refused = 0;
+    std::size_t keyframes = 0, landmarks = 0, memory_bytes = 0;
+    std::int64_t attempts = 0;          ///< keyframes relocalised against it
+    std::int64_t relocalisations = 0;   ///< of those, placed the session in the world
+  };
+  BorrowedStats borrowedStats() const;
+  /// When each session began and was first placed in the world (uplink time).
+  struct SessionPlacement {
+    std::uint32_t session = 0;
+    double started = 0;        ///< [s] its first frame
+    double placed = -1;        ///< [s] first placed (-1: not yet)
+    bool by_borrowed = false;  ///< by the borrowed map (else by the server's world <- odom)
+  };
+  std::vector<SessionPlacement> placements() const {
+    std::lock_guard<std::mutex> lock(global_mu_);
+    return placements_;
+  }
+
  private:
   AgentPipeline(const AgentPipelineParams& params, const std::string& name,
                 const AgentCamera& camera, std::unique_ptr<distill::Distiller> distiller);
@@ -263,6 +292,15 @@ class AgentPipeline {
   std::uint32_t session_ = 1;
   mutable std::mutex global_mu_;
   GlobalPoseState global_pose_;
+  std::vector<SessionPlacement> placements_;  ///< under global_mu_
+  /// Uplink time of a frame stamp (the uplink clock when one is set).
+  double uplinkTime(double stamp) const;
+  /// Places the current session by the borrowed map from the newest keyframe
+  /// (when not placed yet); tells the borrowed map where the robot is otherwise.
+  void placeByBorrowedMap(double stamp);
+  mutable std::mutex borrowed_mu_;  ///< borrowed_ and its counters
+  BorrowedMap borrowed_;
+  std::int64_t borrowed_attempts_ = 0, borrowed_relocalisations_ = 0;
   std::vector<std::pair<std::uint32_t, std::uint64_t>> submitted_;  ///< under uplink_mu_
   std::unique_ptr<UplinkSender> uplink_;
   double clock_offset_ = 0;

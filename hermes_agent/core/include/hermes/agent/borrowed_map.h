@@ -59,7 +59,8 @@ struct BorrowedMapParams {
   /// With a position guess: only landmarks of borrowed keyframes whose camera
   /// lies within this distance of it are matched [m]; 0 = all landmarks.
   double search_radius_m = 0;
-  /// Pixel sigma of a keypoint = this ^ octave (the ORB pyramid's scale_factor).
+  /// Pixel sigma of a keypoint = this ^ octave: the ORB pyramid's scale_factor
+  /// (not a key of its own: the pipeline sets it from orb.scale_factor).
   double octave_scale = 1.2;
 
   Status read(const Config& config, const std::string& prefix = "borrowed");

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "hermes/agent/agent_threads.h"
+#include "hermes/agent/borrowed_map.h"
 #include "hermes/agent/camera_input_params.h"
 #include "hermes/agent/tracker.h"
 #include "hermes/agent/uplink_sender.h"
@@ -27,6 +28,7 @@ struct AgentPipelineParams {
   distill::DistillParams distill;    ///< section distill
   UplinkParams uplink;               ///< section uplink (buffer, monitor)
   AgentThreadParams threads;         ///< section agent (parallel, window_queue)
+  BorrowedMapParams borrowed;        ///< section borrowed (the map the server sends down)
 
   /// The window period: the tracker's cut (window.period_s) and the budget's Δt.
   void setWindowPeriod(double period_s) { tracker.window.period_s = distill.window_s = period_s; }
