@@ -575,6 +575,11 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
                   100.0 * sent_mb * 1e6 / double(res.raw_streaming_bytes), double(res.raw_streaming_bytes) / 1e6);
     o << buf;
   }
+  if (res.camera_bytes > 0) {
+    std::snprintf(buf, sizeof buf, "            %.2f %% of the %.0f MB of images the cameras took (uncompressed)\n",
+                  100.0 * sent_mb * 1e6 / double(res.camera_bytes), double(res.camera_bytes) / 1e6);
+    o << buf;
+  }
   if (run.downlink()) {  // the map back to the robots (server.downlink)
     std::int64_t down = 0, placed = 0;
     for (const AgentMetrics& a : m.per_agent) {
@@ -584,11 +589,6 @@ std::string formatReport(const OfflineRun& run, const RunResults& res) {
     std::snprintf(buf, sizeof buf,
                   "  received  %.1f kB of the map back (%.0f B/s per robot at most); %lld session(s) placed by it\n",
                   double(down) / 1e3, run.params().server.downlink.bytes_per_s, ll(placed));
-    o << buf;
-  }
-  if (res.camera_bytes > 0) {
-    std::snprintf(buf, sizeof buf, "            %.2f %% of the %.0f MB of images the cameras took (uncompressed)\n",
-                  100.0 * sent_mb * 1e6 / double(res.camera_bytes), double(res.camera_bytes) / 1e6);
     o << buf;
   }
   std::snprintf(buf, sizeof buf, "  %-14s %20s   %24s   %9s\n", "ATE [cm]", "odometry (own frame)",
