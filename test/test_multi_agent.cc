@@ -21,6 +21,8 @@
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/GlobalPose.h>
+#include <hermes_msgs/MapDown.h>
+#include <hermes_msgs/MapDownAck.h>
 #include <hermes_msgs/SubmapAck.h>
 #include <nav_msgs/Odometry.h>
 #include <nav_msgs/Path.h>
@@ -69,6 +71,9 @@ struct Observed {
   std::string status;
   std::map<std::string, nlohmann::json> uplink;  ///< per robot, its last uplink_status
   std::map<std::string, hermes_msgs::GlobalPose> global;  ///< per uuid, the latest world <- odom
+  /// The downlink: per uuid, the (epoch, seq) packets sent and acknowledged, bytes sent.
+  std::map<std::string, std::set<std::pair<std::uint64_t, std::uint64_t>>> down_sent, down_acked;
+  std::map<std::string, std::size_t> down_bytes;
 };
 
 /// MQTT mode: the broker this test runs (kept for every test of the process) and
@@ -205,6 +210,17 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
       "/hermes/global_pose", 100, [&](const hermes_msgs::GlobalPoseConstPtr& g) {
         std::lock_guard<std::mutex> l(o.mu);
         o.global[g->agent_uuid] = *g;
+      }));
+  subs.push_back(nh.subscribe<hermes_msgs::MapDown>(
+      "/hermes/map_down", 100, [&](const hermes_msgs::MapDownConstPtr& m) {
+        std::lock_guard<std::mutex> l(o.mu);
+        o.down_sent[m->agent_uuid].insert({m->epoch, m->seq});
+        o.down_bytes[m->agent_uuid] += m->data.size();
+      }));
+  subs.push_back(nh.subscribe<hermes_msgs::MapDownAck>(
+      "/hermes/map_down_ack", 100, [&](const hermes_msgs::MapDownAckConstPtr& a) {
+        std::lock_guard<std::mutex> l(o.mu);
+        o.down_acked[a->agent_uuid].insert({a->epoch, a->seq});
       }));
   subs.push_back(nh.subscribe<hermes_msgs::AgentHeartbeat>(
       "/hermes/heartbeat", 10, [&](const hermes_msgs::AgentHeartbeatConstPtr& h) {
@@ -372,6 +388,18 @@ TEST(MultiAgent, ThreeAgentsMergeOverRosTopicsExactlyOnce) {
   // the merged map's alignment).
   if (mqtt) return;
   ASSERT_EQ(o.global.size(), 3u) << "not every robot got /hermes/global_pose";
+  // Every placed robot got the map around it back, and acknowledged each packet
+  // (one per server start a shutdown or a kill cut short aside).
+  for (const auto& [uuid, g] : o.global) {
+    const std::string name = o.name_of_uuid[uuid];
+    const auto& sent = o.down_sent[uuid];
+    const auto& acked = o.down_acked[uuid];
+    std::printf("%s: %zu downlink packets, %zu B, %zu acknowledged\n", name.c_str(), sent.size(),
+                o.down_bytes[uuid], acked.size());
+    EXPECT_GE(sent.size(), 1u) << name << " got no /hermes/map_down";
+    EXPECT_GE(acked.size() + 2, sent.size()) << name << " did not acknowledge its packets";
+    for (const auto& k : acked) EXPECT_TRUE(sent.count(k)) << name << " acknowledged a packet never sent";
+  }
   for (const auto& [uuid, g] : o.global) {
     const std::string name = o.name_of_uuid[uuid];
     ASSERT_TRUE(kSequence.count(name) && !o.odom[name].empty()) << "global pose for '" << name << "'";

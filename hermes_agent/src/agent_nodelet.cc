@@ -71,6 +71,8 @@
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/GlobalPose.h>
+#include <hermes_msgs/MapDown.h>
+#include <hermes_msgs/MapDownAck.h>
 #include <hermes_msgs/SubmapAck.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -238,6 +240,8 @@ class AgentNodelet : public nodelet::Nodelet {
       heartbeat_pub_ = nh.advertise<hermes_msgs::AgentHeartbeat>("/hermes/heartbeat", 5);
       ack_sub_ = nh.subscribe("/hermes/submap_ack", 100, &AgentNodelet::onAck, this);
       global_sub_ = nh.subscribe("/hermes/global_pose", 20, &AgentNodelet::onGlobalPose, this);
+      down_sub_ = nh.subscribe("/hermes/map_down", 20, &AgentNodelet::onMapDown, this);
+      down_ack_pub_ = nh.advertise<hermes_msgs::MapDownAck>("/hermes/map_down_ack", 20);
       if (!relay_for_.empty() && !startRelay(nh, *config)) return;
     }
     done_sub_ = nh.subscribe("done", 1, &AgentNodelet::onDone, this);
@@ -562,6 +566,23 @@ class AgentNodelet : public nodelet::Nodelet {
     takeGlobalPose(u, "/hermes/global_pose");
   }
 
+  /// The server's downlink (server.downlink): into the pipeline's borrowed map, acknowledged.
+  void onMapDown(const hermes_msgs::MapDownConstPtr& m) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!pipeline_ || m->agent_uuid != uuid_) return;
+    auto ack = pipeline_->onMapDown(m->data.data(), m->data.size(), ros::WallTime::now().toSec());
+    if (!ack) {
+      NODELET_WARN_THROTTLE(5.0, "Agent %s: /hermes/map_down: %s", robot_.c_str(), ack.error().c_str());
+      return;
+    }
+    hermes_msgs::MapDownAck a;
+    a.header.stamp = ros::Time::now();
+    a.agent_uuid = uuid_;
+    a.epoch = ack->epoch;
+    a.seq = ack->seq;
+    down_ack_pub_.publish(a);
+  }
+
   /// This robot's world <- odom (ROS or MQTT; call with mu_ held and the pipeline made).
   void takeGlobalPose(const hermes::GlobalPoseUpdate& u, const char* source) {
     if (hermes::Status s = u.validate(); !s) {
@@ -723,7 +744,8 @@ class AgentNodelet : public nodelet::Nodelet {
   std::int64_t tracked_ = 0, feed_errors_ = 0;
   OdomPublisher odom_;
   ros::Publisher submap_pub_, heartbeat_pub_, uplink_status_pub_;
-  ros::Subscriber global_sub_;
+  ros::Subscriber global_sub_, down_sub_;
+  ros::Publisher down_ack_pub_;
   bool placed_ = false;  ///< the first world <- odom was taken (logged once)
   std::vector<std::pair<std::uint32_t, std::uint64_t>> created_, replayed_;
   bool done_ = false;

@@ -10,6 +10,8 @@
 //        /hermes/path/<robot id> (nav_msgs/Path of merged keyframes, frame "world")
 //        /hermes/global_map (sensor_msgs/PointCloud2 xyz + rgb, each point in its robot's colour, frame "world", latched)
 //        /hermes/loops (visualization_msgs/Marker LINE_LIST of accepted loops)
+//        /hermes/map_down (MapDown: server.downlink, the map around each placed
+//        robot, planned on the merge thread; in: /hermes/map_down_ack)
 //        TF world -> hermes_origin (1 Hz), so the fixed frame exists; the robots'
 //        own nodelets publish world -> <robot>/odom from /hermes/global_pose
 // Threading (~parallel, default true): the ROS-free ServerWorker
@@ -51,6 +53,8 @@
 #include <hermes_msgs/AgentHeartbeat.h>
 #include <hermes_msgs/EncodedSubmap.h>
 #include <hermes_msgs/GlobalPose.h>
+#include <hermes_msgs/MapDown.h>
+#include <hermes_msgs/MapDownAck.h>
 #include <hermes_msgs/SubmapAck.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
@@ -64,6 +68,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <mutex>
 
 #include "hermes/core/config_file.h"
 #include "hermes/server/server.h"
@@ -154,10 +159,20 @@ class ServerNode {
     global_pub_ = nh.advertise<hermes_msgs::GlobalPose>("/hermes/global_pose", 100);
     hermes::server::ServerWorkerParams wp;
     wp.parallel = parallel;
+    if (server->params().downlink.enabled && !mqtt_) {
+      // A new epoch every start: the robots key what they took by (epoch, seq).
+      downlink_ = std::make_unique<hermes::server::Downlink>(server->params().downlink,
+                                                             ros::WallTime::now().toNSec() / 1000);
+      down_pub_ = nh.advertise<hermes_msgs::MapDown>("/hermes/map_down", 20);
+      down_ack_sub_ = nh.subscribe("/hermes/map_down_ack", 100, &ServerNode::onMapDownAck, this);
+    }
     worker_ = std::make_unique<ServerWorker>(
         std::move(server), wp, [] { return ros::WallTime::now().toSec(); },
         [this](const MergedView& v) {
           if (ros::ok()) publishGlobalPoses(v, false);  // not once ROS shuts down (finish() stops the thread)
+        },
+        [this](const Server& s, double now) {
+          if (ros::ok() && downlink_) sendDownlink(s, now);
         });
     if (mqtt_) {
       mqtt_timer_ = nh.createWallTimer(ros::WallDuration(0.02), [this](const ros::WallTimerEvent&) { onMqtt(); });
@@ -235,6 +250,39 @@ class ServerNode {
         ROS_WARN_THROTTLE(1.0, "hermes_server: rejected submap on hermes/%s/submap seq %lu: %s", f.agent.c_str(),
                           static_cast<unsigned long>(r.routing.seq), r.reason.c_str());
     }
+  }
+
+  /// On the merge thread (after merges, and every second while idle): the
+  /// downlink's packets for the robots' current sessions (downlink.h).
+  void sendDownlink(const Server& s, double now) {
+    std::vector<hermes::server::DownlinkRecipient> recipients;
+    {
+      const auto lock = s.lockIntake();
+      const hermes::Bookkeeper& bk = s.bookkeeper();
+      for (hermes::RobotId r : bk.robots()) {
+        const hermes::AgentStats* st = bk.stats(r);
+        if (st && !bk.isPrior(r)) recipients.push_back({r, st->uuid, st->current_session});
+      }
+    }
+    std::lock_guard<std::mutex> lock(down_mu_);
+    for (const hermes::server::Downlink::Outgoing& o : downlink_->plan(s.map(), recipients, now)) {
+      hermes_msgs::MapDown m;
+      m.header.stamp = ros::Time::now();
+      m.agent_uuid = hermes::toString(o.agent);
+      m.epoch = downlink_->epoch();
+      m.seq = o.seq;
+      m.data = *o.bytes;
+      down_pub_.publish(m);
+    }
+  }
+
+  void onMapDownAck(const hermes_msgs::MapDownAckConstPtr& a) {
+    hermes::MapDownAck ack;
+    if (!hermes::parseUuid(a->agent_uuid, &ack.agent)) return;
+    ack.epoch = a->epoch;
+    ack.seq = a->seq;
+    std::lock_guard<std::mutex> lock(down_mu_);
+    downlink_->onAck(ack, ros::WallTime::now().toSec());
   }
 
   void onHeartbeat(const hermes_msgs::AgentHeartbeatConstPtr& h) {
@@ -344,6 +392,10 @@ class ServerNode {
   ros::WallTimer process_timer_, publish_timer_;
   tf2_ros::TransformBroadcaster tf_;
   std::uint64_t published_version_ = 0;  ///< view last published (0: none; a resumed server holds a map)
+  std::mutex down_mu_;  ///< downlink_: planned on the merge thread, acknowledged on the spinner
+  std::unique_ptr<hermes::server::Downlink> downlink_;  ///< server.downlink (ROS transport)
+  ros::Publisher down_pub_;
+  ros::Subscriber down_ack_sub_;
   std::unique_ptr<ServerWorker> worker_;  ///< last: its merge thread ends first (publishes with the above)
 };
 

@@ -1,19 +1,23 @@
 #include "hermes/server/server_worker.h"
 
+#include <chrono>
+
 namespace hermes {
 namespace server {
 
 Status ServerWorkerParams::validate() const {
   if (latency_window < 1) return Error{"server worker: latency_window must be >= 1"};
+  if (!(tend_period_s > 0)) return Error{"server worker: tend_period_s must be > 0"};
   return Status::Ok();
 }
 
 ServerWorker::ServerWorker(std::unique_ptr<Server> server, ServerWorkerParams params, Clock clock,
-                           Merged on_merged)
+                           Merged on_merged, Tend tend)
     : server_(std::move(server)),
       params_(params),
       clock_(std::move(clock)),
       on_merged_(std::move(on_merged)),
+      tend_(std::move(tend)),
       acks_(params.latency_window) {
   HERMES_CHECK(server_ != nullptr, "server worker: no server");
   HERMES_CHECK(static_cast<bool>(clock_), "server worker: no clock");
@@ -61,11 +65,16 @@ int ServerWorker::process(double now, int max_submaps) {
 void ServerWorker::loop() {
   std::unique_lock<std::mutex> l(mu_);
   while (true) {
-    wake_.wait(l, [this] { return stopping_ || work_; });
+    const auto woken = [this] { return stopping_ || work_; };
+    if (tend_)
+      wake_.wait_for(l, std::chrono::duration<double>(params_.tend_period_s), woken);
+    else
+      wake_.wait(l, woken);
     if (stopping_) break;
     work_ = false;
     merging_ = true;
     l.unlock();
+    tend(false);
     // One submap per call: a stop request is seen between merges, and every
     // merge gets its own view.
     // Then the deferred loop closures, a budget at a time, each after any
@@ -118,6 +127,15 @@ void ServerWorker::publish(bool force) {
     view_ = v;
   }
   if (on_merged_) on_merged_(*v);
+  tend(true);
+}
+
+void ServerWorker::tend(bool force) {
+  if (!tend_) return;
+  const double now = clock_();
+  if (!force && now - last_tend_ < params_.tend_period_s) return;
+  last_tend_ = now;
+  tend_(*server_, now);
 }
 
 void ServerWorker::waitIdle() {

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <future>
 #include <mutex>
+#include <thread>
 
 #include "hermes/server/server_worker.h"
 #include "support/multi_agent_fixture.h"
@@ -335,6 +336,30 @@ TEST(ServerWorker, MetricsCarryTheAcknowledgementLatency) {
   EXPECT_EQ(m.timings_ms.at("ack_latency").count, 3);
   EXPECT_DOUBLE_EQ(m.timings_ms.at("ack_latency").median, 2.0);
   EXPECT_TRUE(m.bytes_total.has_value());
+}
+
+// The tend hook (the node's downlink plan): on the merge thread after every
+// merge, and every tend_period_s while no submap comes.
+TEST(ServerWorker, TendRunsAfterMergesAndWhileIdle) {
+  const auto frames = schedule();
+  std::atomic<int> calls{0};
+  std::atomic<std::size_t> merged_seen{0};
+  ServerWorkerParams p;
+  p.tend_period_s = 0.05;
+  ServerWorker worker(
+      makeServer(), p, [] { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); },
+      nullptr, [&](const Server& s, double) {
+        ++calls;
+        merged_seen = s.counters().merged;
+      });
+  for (std::size_t i = 0; i < 3; ++i) worker.onFrame(frames[i]->data(), frames[i]->size(), nullptr, 1.0 + i);
+  worker.waitIdle();
+  EXPECT_EQ(merged_seen.load(), 3u) << "the hook saw the map after the last merge";
+  const int after_merges = calls.load();
+  EXPECT_GE(after_merges, 3);
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  EXPECT_GE(calls.load(), after_merges + 3) << "idle: every tend_period_s";
+  worker.stop();
 }
 
 }  // namespace

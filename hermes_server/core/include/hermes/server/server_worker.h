@@ -54,6 +54,7 @@ namespace server {
 struct ServerWorkerParams {
   bool parallel = true;               ///< false: no thread, the owner calls process()
   std::size_t latency_window = 2000;  ///< acknowledgement latencies kept for median / p95 [samples]
+  double tend_period_s = 1.0;         ///< the tend hook runs at least this often while idle [s]
   Status validate() const;
 };
 
@@ -63,9 +64,13 @@ class ServerWorker {
   using Clock = std::function<double()>;
   /// After every merge (on the merging thread): the new view.
   using Merged = std::function<void(const MergedView&)>;
+  /// On the merging thread after every merge and at least every
+  /// params.tend_period_s while idle: work that reads the map between merges
+  /// (the downlink's plan). Reading the intake state needs lockIntake().
+  using Tend = std::function<void(const Server&, double now)>;
 
   ServerWorker(std::unique_ptr<Server> server, ServerWorkerParams params, Clock clock,
-               Merged on_merged = nullptr);
+               Merged on_merged = nullptr, Tend tend = nullptr);
   ServerWorker(const ServerWorker&) = delete;
   ServerWorker& operator=(const ServerWorker&) = delete;
   ~ServerWorker();
@@ -111,6 +116,10 @@ class ServerWorker {
   const ServerWorkerParams params_;
   Clock clock_;
   Merged on_merged_;
+  Tend tend_;
+  double last_tend_ = -1e300;  ///< merge thread
+  /// The tend hook when due (or `force`), merge thread.
+  void tend(bool force);
   mutable std::mutex mu_;  ///< work_, view_, acks_
   std::condition_variable wake_, idle_;
   bool work_ = false;     ///< a submap was queued since the merge thread last looked
