@@ -2,6 +2,9 @@
 
 #include "hermes/core/render_cache.h"
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -87,6 +90,51 @@ Expected<WindowInfo> writeEurocWindow(const std::string& source, double start_s,
     return Error{"dataset window of " + source + ": no frame in [" + std::to_string(start_s) + ", " +
                  std::to_string(start_s + duration_s) + ") s"};
   return info;
+}
+
+Expected<double> blackOutFrames(const std::string& view, double from_s, double to_s) {
+  const fs::path mav0 = fs::path(view) / "mav0";
+  std::error_code ec;
+  std::int64_t first_ns = -1;
+  double first_after = -1;
+  std::size_t blacked = 0;
+  for (const char* cam : {"cam0", "cam1"}) {
+    const fs::path csv = mav0 / cam / "data.csv", images = mav0 / cam / "data";
+    std::ifstream f(csv);
+    if (!f) return Error{"black out: cannot read " + csv.string()};
+    if (!fs::is_symlink(images)) return Error{"black out: " + images.string() + " is not a window view's link"};
+    const fs::path source = fs::read_symlink(images);
+    fs::remove(images, ec);
+    fs::create_directory(images, ec);
+    if (ec) return Error{"black out: cannot create " + images.string() + ": " + ec.message()};
+    std::string line;
+    for (int row = 1; std::getline(f, line); ++row) {
+      if (line.empty() || line[0] == '#') continue;
+      const std::size_t comma = line.find(',');
+      std::int64_t ns = 0;
+      std::istringstream ls(line.substr(0, comma));
+      if (!(ls >> ns) || comma == std::string::npos)
+        return Error{csv.string() + ":" + std::to_string(row) + ": not 'stamp,file' in '" + line + "'"};
+      std::string name = line.substr(comma + 1);
+      while (!name.empty() && (name.back() == '\r' || name.back() == ' ')) name.pop_back();
+      if (first_ns < 0) first_ns = ns;
+      const double t = static_cast<double>(ns - first_ns) * 1e-9;
+      if (t < from_s || t >= to_s) {
+        if (t >= to_s && first_after < 0) first_after = static_cast<double>(ns) * 1e-9;
+        fs::create_symlink(source / name, images / name, ec);
+        if (ec) return Error{"black out: cannot link " + (images / name).string() + ": " + ec.message()};
+        continue;
+      }
+      const cv::Mat image = cv::imread((source / name).string(), cv::IMREAD_UNCHANGED);
+      if (image.empty()) return Error{"black out: cannot read " + (source / name).string()};
+      if (!cv::imwrite((images / name).string(), cv::Mat::zeros(image.size(), image.type())))
+        return Error{"black out: cannot write " + (images / name).string()};
+      ++blacked;
+    }
+  }
+  if (blacked == 0)
+    return Error{"black out " + view + ": no frame in [" + std::to_string(from_s) + ", " + std::to_string(to_s) + ") s"};
+  return first_after;
 }
 
 Status ensureWholeRenders(const std::string& data, const std::vector<std::string>& sequences,

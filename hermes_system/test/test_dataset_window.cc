@@ -8,6 +8,9 @@
 
 #include <unistd.h>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
 #include "hermes/core/render/settings.h"
 #include "hermes/core/render_cache.h"
 #include "hermes/system/dataset_window.h"
@@ -76,6 +79,50 @@ TEST(DatasetWindow, ErrorsNameTheProblem) {
   EXPECT_NE(missing.error().find("cam0/data.csv"), std::string::npos) << missing.error();
   auto bad = writeEurocWindow(src.string(), 0.0, 0.0, (root / "view").string());
   EXPECT_FALSE(bad.ok());
+  fs::remove_all(root);
+}
+
+// A camera gone dark in a view: black files for the stretch, links for the rest,
+// the source untouched; a stretch without frames and a second pass are refused.
+TEST(DatasetWindow, BlackOutDarkensTheViewNotTheSource) {
+  const fs::path root = fs::temp_directory_path() / ("hermes_window_dark_" + std::to_string(::getpid()));
+  fs::remove_all(root);
+  const fs::path src = makeSource(root);
+  const cv::Mat grey(6, 8, CV_8UC1, cv::Scalar(100));
+  for (const char* cam : {"cam0", "cam1"})
+    for (int i = 0; i < 100; ++i)
+      ASSERT_TRUE(cv::imwrite((src / "mav0" / cam / "data" /
+                               (std::to_string(1403636580000000000LL + 100000000LL * i) + ".png")).string(), grey));
+  const fs::path view = root / "view";
+  ASSERT_TRUE(writeEurocWindow(src.string(), 2.0, 3.0, view.string()).ok());
+  auto none = blackOutFrames(view.string(), 10.0, 11.0);
+  ASSERT_FALSE(none.ok());
+  EXPECT_NE(none.error().find("no frame"), std::string::npos) << none.error();
+  ASSERT_TRUE(writeEurocWindow(src.string(), 2.0, 3.0, view.string()).ok());
+  auto after = blackOutFrames(view.string(), 1.0, 1.5);  // t = 3.0 .. 3.4 s of the source
+  ASSERT_TRUE(after.ok()) << after.error();
+  EXPECT_NEAR(*after, 1403636583.5, 1e-6);
+  for (const char* cam : {"cam0", "cam1"}) {
+    const fs::path images = view / "mav0" / cam / "data";
+    EXPECT_FALSE(fs::is_symlink(images));
+    int dark = 0, linked = 0;
+    for (const auto& e : fs::directory_iterator(images)) {
+      if (fs::is_symlink(e.path())) {
+        ++linked;
+        continue;
+      }
+      ++dark;
+      EXPECT_EQ(cv::countNonZero(cv::imread(e.path().string(), cv::IMREAD_UNCHANGED)), 0) << e.path();
+    }
+    EXPECT_EQ(dark, 5) << cam;
+    EXPECT_EQ(linked, 25) << cam;
+  }
+  const cv::Mat source = cv::imread((src / "mav0" / "cam0" / "data" / "1403636583000000000.png").string(),
+                                    cv::IMREAD_UNCHANGED);
+  EXPECT_EQ(cv::countNonZero(source), 48) << "the source stays as it was";
+  auto again = blackOutFrames(view.string(), 0.0, 1.0);
+  ASSERT_FALSE(again.ok());
+  EXPECT_NE(again.error().find("link"), std::string::npos) << again.error();
   fs::remove_all(root);
 }
 

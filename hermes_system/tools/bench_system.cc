@@ -45,6 +45,7 @@
 #include "hermes/system/offline_run.h"
 #include "hermes/system/run_results.h"
 #include "hermes/system/tracking_record.h"
+#include "tracked_run.h"
 #include "hermes_help/hermes_bench_system.h"  // tools/help/hermes_bench_system.txt
 
 using namespace hermes;
@@ -102,7 +103,7 @@ double loadAverage() {
   return l;
 }
 
-using Robots = std::vector<std::pair<std::string, fs::path>>;  // name, dataset folder
+using system::bench::Robots;
 
 /// The three hall robots rendered from `start` seconds of their trajectories
 /// (cached under cache/d<duration>_r<rate>[_s<start>]). One scene for every
@@ -159,55 +160,25 @@ Expected<nlohmann::json> runVariant(const std::string& v, const std::string& bw,
                                     std::string* tracking_mode = nullptr, bool record_only = false) {
   std::vector<std::string> sets = overrides;
   for (const std::string& s : variantSets(v)) sets.push_back(s);
-  sets.push_back("link.bandwidth_mbitps=" + bw);
-  sets.push_back("uplink.buffer.fsync=false");
-  auto config = loadConfig("", sets);
-  if (!config.ok()) return Error{config.error()};
-  auto params = system::readSystemParams(*config);
+  auto params = system::bench::benchParams(sets, bw);
   if (!params.ok()) return Error{params.error()};
-  auto openSources = [&]() -> Expected<std::vector<system::AgentSource>> {
-    std::vector<system::AgentSource> sources;
-    for (const auto& [name, dir] : robots) {
-      auto ds = Dataset::open(dir.string(), params->run.dataset);
-      if (!ds.ok()) return Error{ds.error()};
-      sources.push_back({name, std::move(*ds), 0});
-    }
-    return sources;
-  };
-  auto sources = openSources();
-  if (!sources) return Error{sources.error()};
+  auto openSources = [&] { return system::bench::openRobots(robots, *params); };
   // Tracking: each robot whose recording in tracking_dir fits this run is
-  // replayed (tracking_record.h), the others are tracked and recorded there
-  // (the first run of a set, a robot corrupted, changed sequences or tracker
-  // settings).
-  std::string mode = "live";
-  if (!tracking_dir.empty()) {
-    const Status fit = system::trackingRecordingsFit(*params, *sources, tracking_dir);
-    mode = fit ? "replay" : "record";
-    params->clock.tracking_replay_dir = tracking_dir;
-    if (!fit) params->clock.tracking_record_dir = tracking_dir;
-    if (!fit && fs::exists(tracking_dir) && !record_only)
-      std::fprintf(stderr, "  %s_%s: recording the tracking again where it does not fit: %s\n",
-                   v.c_str(), bw.c_str(), fit.error().c_str());
-    if (record_only && fit) {  // a --jobs recorder with nothing to do
-      if (tracking_mode) *tracking_mode = mode;
+  // replayed, the others are tracked and recorded there (the first run of a
+  // set, a robot corrupted, changed sequences or tracker settings).
+  if (record_only && !tracking_dir.empty()) {  // a --jobs recorder with nothing to do
+    auto sources = openSources();
+    if (!sources) return Error{sources.error()};
+    if (system::trackingRecordingsFit(*params, *sources, tracking_dir)) {
+      if (tracking_mode) *tracking_mode = "replay";
       return nlohmann::json::object();
     }
   }
   // One spool per process: two benchmarks may run side by side.
   const std::string spool =
       (fs::temp_directory_path() / ("hermes_bench_system_spool_" + std::to_string(::getpid()))).string();
-  auto run = system::OfflineRun::create(*params, std::move(*sources), spool, HERMES_SOURCE_DIR);
-  if (!run.ok() && mode == "replay") {  // e.g. a recording cut short: record it again
-    std::fprintf(stderr, "  %s_%s: recording the tracking again: %s\n", v.c_str(), bw.c_str(),
-                 run.error().c_str());
-    mode = "record";
-    params->clock.tracking_replay_dir.clear();
-    params->clock.tracking_record_dir = tracking_dir;
-    sources = openSources();
-    if (!sources) return Error{sources.error()};
-    run = system::OfflineRun::create(*params, std::move(*sources), spool, HERMES_SOURCE_DIR);
-  }
+  std::string mode;
+  auto run = system::bench::createTrackedRun(*params, openSources, tracking_dir, spool, v + "_" + bw, &mode);
   if (!run.ok()) return Error{run.error()};
   if (tracking_mode) *tracking_mode = mode;
   std::fprintf(stderr, "  %s_%s: tracking %s%s\n", v.c_str(), bw.c_str(), mode.c_str(),

@@ -25,6 +25,14 @@ struct WindowInfo {
 Expected<WindowInfo> writeEurocWindow(const std::string& source, double start_s, double duration_s,
                                       const std::string& out);
 
+/// Blacks out the stereo images of the window view `view` (writeEurocWindow)
+/// stamped in [from_s, to_s) after its first frame: a camera gone dark. The
+/// view's image folders become folders of their own (links to the source's
+/// images, black files in their place for those frames); the source is never
+/// written. Returns the stamp [s] of the first frame after the stretch. Errors
+/// name the file; a stretch holding no frame is an error.
+Expected<double> blackOutFrames(const std::string& view, double from_s, double to_s);
+
 /// Makes sure `data` holds whole-sequence renders of every one of `sequences`
 /// (<data>/<sequence>/mav0): if one is missing, renders all of them in one
 /// scene from `trajectories_dir`/<sequence>.txt at `rate_hz` (render_cache.h).
