@@ -349,8 +349,9 @@ std::vector<std::pair<RobotId, std::uint32_t>> Bookkeeper::checkRelocalisation(d
 }
 
 double Bookkeeper::clock() const {
-  double now = -1;
-  for (const AgentStats& a : agents_) now = std::max(now, a.last_time);
+  double now = -1;  // a prior map's arrivals are another mission's clock
+  for (const AgentStats& a : agents_)
+    if (a.name.rfind(kPriorPrefix, 0) != 0) now = std::max(now, a.last_time);
   return now;
 }
 

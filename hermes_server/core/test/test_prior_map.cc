@@ -111,6 +111,11 @@ TEST(PriorMap, NewRobotsAndAReturningOneArePlacedInThePriorsWorldFrame) {
     ASSERT_TRUE(robot.has_value()) << a;
     EXPECT_FALSE(s.bookkeeper().isPrior(*robot)) << a;
     EXPECT_TRUE(s.bookkeeper().anchored(*robot)) << "agent " << a << " not placed in the prior's frame";
+    // Placed on this mission's clock (its first submaps), not at the prior's last arrival.
+    const SessionStats& first = s.bookkeeper().stats(*robot)->sessions.begin()->second;
+    EXPECT_GE(first.anchored_at, first.first_time) << a;
+    EXPECT_LE(first.anchored_at - first.first_time, 4.0) << "agent " << a << " placed " << first.anchored_at
+                                                         << " s, first submap " << first.first_time << " s";
   }
   EXPECT_EQ(s.mapManager().agentsMerged(), 2);
   EXPECT_EQ(s.mapManager().priorAgents(), 2);

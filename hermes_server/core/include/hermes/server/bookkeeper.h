@@ -240,7 +240,7 @@ class Bookkeeper {
   std::set<std::tuple<RobotId, std::uint32_t, std::uint64_t>> applied_;
   std::optional<RobotId> world_;
   std::optional<double> first_qualified_s_;  ///< arrival clock when an agent first qualified
-  double clock() const;  ///< the latest arrival time over agents (-1 before any)
+  double clock() const;  ///< the latest arrival time over this mission's agents, not the prior's (-1 before any)
 };
 
 }  // namespace hermes
