@@ -21,6 +21,12 @@ function(hermes_module)
     file(WRITE ${srcs} "namespace hermes { void ${M_NAME}_empty() {} }\n")
   endif()
   add_library(${M_NAME} SHARED ${srcs})
+  # Unity build (HERMES_UNITY_BUILD): the library's sources compiled in batches,
+  # so the heavy headers (Eigen, OpenCV, Ceres) are parsed once a batch, not
+  # once a file. Code generation is the same; a file's helpers must not clash
+  # with another file's of the same library (put shared ones in a header).
+  set_target_properties(${M_NAME} PROPERTIES
+    UNITY_BUILD ${HERMES_UNITY_BUILD} UNITY_BUILD_BATCH_SIZE ${HERMES_UNITY_BATCH})
   target_include_directories(${M_NAME} PUBLIC
     $<BUILD_INTERFACE:${M_DIR}/include>)
   target_link_libraries(${M_NAME} PUBLIC ${M_DEPS})

@@ -74,40 +74,78 @@ esac
 GT_DIR="$ROOT/config/trajectories"   # shipped EuRoC ground truth (see its README)
 [[ -f "$GT_DIR/MH_01_easy.txt" ]] || { echo "hermes demo: no EuRoC ground-truth trajectories in $GT_DIR" >&2; exit 2; }
 
-T0=$SECONDS
-echo "[demo] set-up and build (ROS-free tools; first time: several minutes)"
-"$HERMES" build --no-ros --target hermes_sim --target hermes_run >/dev/null   # installs what is missing first
-BIN="${HERMES_BUILD_NOROS_DIR:-$ROOT/build-noros}/bin"   # the tree ./hermes build --no-ros builds
-mkdir -p "$OUT" "$CACHE"
-
 for v in "$START" "$DURATION" "$RATE" "$BANDWIDTH"; do
   [[ "$v" =~ ^[0-9]+([.][0-9]+)?$ ]] || { echo "hermes demo: '$v' is not a number (see --help)" >&2; exit 2; }
 done
+
+T0=$SECONDS
+BIN="${HERMES_BUILD_NOROS_DIR:-$ROOT/build-noros}/bin"   # the tree ./hermes build --no-ros builds
+mkdir -p "$OUT" "$CACHE"
+BUILD_LOG="$CACHE/build.log"
+
+# Progress of the background jobs every 10 s, when it moved: the build's newest
+# percentage (make's "[ NN%]") and the renderer's newest frame counts.
+SHOWN=""
+SHOWN_AT=$SECONDS
+show_progress() {  # show_progress <build pid or ""> <render pid or "">
+  local line="" pct frames
+  if [[ -n "$1" ]] && kill -0 "$1" 2>/dev/null; then
+    pct="$(grep -oE '^\[ *[0-9]+%\]' "$BUILD_LOG" 2>/dev/null | tail -n 1 | tr -d '[] ' || true)"
+    line="build ${pct:-starting}"
+  fi
+  if [[ -n "$2" ]] && kill -0 "$2" 2>/dev/null; then
+    frames="$(tr '\r' '\n' <"$LOG" 2>/dev/null | grep -E 'frames' | tail -n 2 | tr '\n' ' ' || true)"
+    line+="${line:+  |  }render ${frames:-starting}"
+  fi
+  (( SECONDS - SHOWN_AT >= 10 )) || return 0
+  if [[ -n "$line" && "$line" != "$SHOWN" ]]; then
+    echo "[demo]   $((SECONDS - T0)) s: $line" >&2
+    SHOWN="$line"; SHOWN_AT=$SECONDS
+  fi
+}
+build_target() {  # build_target <target>: in the background, into $BUILD_LOG (installs what is missing first)
+  "$HERMES" build --no-ros --target "$1" >>"$BUILD_LOG" 2>&1 &
+  BUILD_PID=$!
+}
+wait_build() {
+  wait "$BUILD_PID" || { tail -n 30 "$BUILD_LOG" >&2; echo "hermes demo: the build failed (log: $BUILD_LOG)" >&2; exit 1; }
+}
+
+: >"$BUILD_LOG"
+echo "[demo] set-up and build of the renderer (first time: a few minutes; log $BUILD_LOG)" >&2
+build_target hermes_sim
+while kill -0 "$BUILD_PID" 2>/dev/null; do sleep 1; show_progress "$BUILD_PID" ""; done
+wait_build
+
 KEY="s${START}_d${DURATION}_r${RATE}"
 [[ $LOOK == realistic ]] && KEY+="_realistic"
 JOBS=$(nproc 2>/dev/null || echo 1); (( JOBS > 3 )) && JOBS=3
+LOG="$CACHE/$KEY.log"
+SIM=""
 if [[ $FRESH -eq 1 || ! -f "$CACHE/$KEY.done" ]]; then
-  echo "[demo] rendering 3 robots x ${DURATION} s from ${START} s at ${RATE} Hz, ${LOOK} look, ${JOBS} at once (cached afterwards)"
+  echo "[demo] rendering 3 robots x ${DURATION} s from ${START} s at ${RATE} Hz, ${LOOK} look, ${JOBS} at once (cached afterwards)" >&2
   rm -rf "${CACHE:?}/$KEY"
-  LOG="$CACHE/$KEY.log"
   "$BIN/hermes_sim" --trajectory "$GT_DIR/MH_01_easy.txt" --trajectory "$GT_DIR/MH_02_easy.txt" \
     --trajectory "$GT_DIR/MH_03_medium.txt" --out "$CACHE/$KEY" --format euroc \
     --start "$START" --duration "$DURATION" --rate "$RATE" --seed 1 --jobs "$JOBS" --"$LOOK" >"$LOG" 2>&1 &
   SIM=$!
-  SHOWN=""
-  while kill -0 "$SIM" 2>/dev/null; do   # progress every 10 s, when it moved
-    sleep 10
-    LINE="$(tr '\r' '\n' <"$LOG" | grep -E 'frames' | tail -n 2 | tr '\n' ' ' || true)"
-    if [[ -n "$LINE" && "$LINE" != "$SHOWN" ]]; then echo "[demo]   $LINE"; SHOWN="$LINE"; fi
-  done
-  wait "$SIM" || { echo "hermes demo: rendering failed (see $LOG)" >&2; exit 1; }
-  tr '\r' '\n' <"$LOG" | grep -E 'render [0-9.]+ pairs/s' || true
-  touch "$CACHE/$KEY.done"
 else
-  echo "[demo] using cached rendering $CACHE/$KEY"
+  echo "[demo] using cached rendering $CACHE/$KEY" >&2
+fi
+echo "[demo] build of the runner${SIM:+, beside the rendering}" >&2
+build_target hermes_run
+while kill -0 "$BUILD_PID" 2>/dev/null || { [[ -n "$SIM" ]] && kill -0 "$SIM" 2>/dev/null; }; do
+  sleep 1
+  show_progress "$BUILD_PID" "$SIM"
+done
+wait_build
+if [[ -n "$SIM" ]]; then
+  wait "$SIM" || { echo "hermes demo: rendering failed (see $LOG)" >&2; exit 1; }
+  tr '\r' '\n' <"$LOG" | grep -E 'render [0-9.]+ pairs/s' >&2 || true
+  touch "$CACHE/$KEY.done"
 fi
 
-echo "[demo] running 3 agents + server over one shared ${BANDWIDTH} Mbit/s link"
+echo "[demo] running 3 agents + server over one shared ${BANDWIDTH} Mbit/s link" >&2
 RUN_ARGS=(--out "$OUT" --bandwidth "$BANDWIDTH" "${SETS[@]}")
 for seq in MH_01_easy MH_02_easy MH_03_medium; do RUN_ARGS+=(--dataset "$CACHE/$KEY/$seq"); done
 if [[ $JSON -eq 1 ]]; then

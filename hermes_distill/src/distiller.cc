@@ -8,6 +8,7 @@
 #include <sstream>
 #include <unordered_set>
 
+#include "hermes/core/stopwatch.h"
 #include "hermes/distill/keyframe_trimming.h"
 #include "hermes/distill/selectors.h"
 
@@ -24,10 +25,6 @@ constexpr double kKeypointBytes = 4 + 4 + 4 + 1 + 32;
 // Keypoints without a landmark use at most half of S with the rest of the
 // window: the other half is slack for losses and resends.
 constexpr double kMaxFill = 0.5;
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
 }  // namespace
 
 bool usesTightSelector(const DistillParams& params) {

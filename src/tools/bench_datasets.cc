@@ -13,6 +13,7 @@
 #include <opencv2/features2d.hpp>
 
 #include "hermes/core/dataset.h"
+#include "hermes/core/stopwatch.h"
 #include "hermes_help/hermes_bench_datasets.h"  // tools/help/hermes_bench_datasets.txt
 
 using namespace hermes;
@@ -20,10 +21,6 @@ using namespace hermes;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());

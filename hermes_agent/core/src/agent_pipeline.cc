@@ -4,17 +4,10 @@
 #include <cmath>
 #include <functional>
 
+#include "hermes/core/stopwatch.h"
 #include "hermes/core/wire_format.h"
 
 namespace hermes::agent {
-namespace {
-
-double msSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-      .count();
-}
-
-}  // namespace
 
 Expected<std::unique_ptr<AgentPipeline>> AgentPipeline::create(const AgentPipelineParams& params,
                                                                const std::string& name,

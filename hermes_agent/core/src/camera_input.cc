@@ -15,12 +15,6 @@ namespace {
 
 std::string sizeText(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
-std::string stampText(double t) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.6f", t);
-  return buf;
-}
-
 // Channels an 8-bit encoding needs and its conversion to grey (-1: none); 0 channels = unknown.
 std::pair<int, int> greyConversion(const std::string& enc) {
   if (enc == "mono8" || enc == "8UC1") return {1, -1};
@@ -32,6 +26,12 @@ std::pair<int, int> greyConversion(const std::string& enc) {
 }
 
 }  // namespace
+
+std::string stampText(double t_s) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.6f", t_s);
+  return buf;
+}
 
 Status CameraInputParams::read(const Config& c, const std::string& p) {
   Status s = c.getChoice(p + ".stereo_images", {"auto", "raw", "rectified"}, &stereo_images);

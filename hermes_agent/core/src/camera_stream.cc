@@ -4,16 +4,6 @@
 #include <utility>
 
 namespace hermes::agent {
-namespace {
-
-std::string stampText(double t) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.6f", t);
-  return buf;
-}
-
-}  // namespace
-
 Expected<CameraStream> CameraStream::create(const CameraCalibration& calibration,
                                             const CameraInputParams& params,
                                             const std::string& name_a,

@@ -36,6 +36,7 @@
 #include "hermes/agent/pose_estimation.h"
 #include "hermes/agent/stereo_matcher.h"
 #include "hermes/agent/tracker.h"
+#include "hermes/core/stopwatch.h"
 #include "hermes_help/hermes_bench_frontend.h"  // tools/help/hermes_bench_frontend.txt
 #include "rendered_runs.h"
 
@@ -47,10 +48,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 /// Process CPU time [ms]: less sensitive than wall time to other jobs on the machine.
 double cpuMs() { return 1000.0 * double(std::clock()) / CLOCKS_PER_SEC; }
-
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 nlohmann::json stats(std::vector<double> v) {
   nlohmann::json j;

@@ -16,6 +16,7 @@
 #include <opengv/sac_problems/relative_pose/CentralRelativePoseSacProblem.hpp>
 #include <opengv/sac_problems/relative_pose/NoncentralRelativePoseSacProblem.hpp>
 
+#include "hermes/core/stopwatch.h"
 #include "hermes/server/loop_closure.h"
 #include "loop_refinement.h"
 
@@ -27,10 +28,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using CentralProblem = opengv::sac_problems::relative_pose::CentralRelativePoseSacProblem;
 using NoncentralProblem = opengv::sac_problems::relative_pose::NoncentralRelativePoseSacProblem;
-
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 /// OpenGV scores a correspondence by 1 - cos(angle) between each observed bearing
 /// and the reprojection of the triangulated point, summed over both views.

@@ -4,6 +4,7 @@
 
 #include <chrono>
 
+#include "hermes/core/stopwatch.h"
 #include "hermes/server/global_map.h"
 
 namespace hermes {
@@ -11,9 +12,7 @@ namespace server {
 namespace map_manager_detail {
 
 using Clock = std::chrono::steady_clock;
-inline double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+using hermes::msSince;
 
 inline KeyframeKey keyOf(const TrajectoryMap& t, KeyframeId id) { return KeyframeKey{t.agent, t.session, id}; }
 

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "hermes/core/stopwatch.h"
 #include "hermes/server/loop_closure.h"
 #include "hermes/server/pose_graph.h"
 #include "hermes_help/hermes_bench_loops.h"  // tools/help/hermes_bench_loops.txt
@@ -23,10 +24,6 @@ using namespace hermes;
 using namespace hermes::server;
 using Clock = std::chrono::steady_clock;
 constexpr double kDeg = M_PI / 180.0;
-
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 PinholeIntrinsics camera() {
   PinholeIntrinsics k;

@@ -32,6 +32,9 @@
 
 namespace hermes::agent {
 
+/// A frame stamp as the camera errors print it: seconds, six decimals.
+std::string stampText(double t_s);
+
 class CameraInput {
  public:
   /// Errors: invalid params or calibration, a rig that cannot be rectified.
