@@ -39,6 +39,20 @@ const StoredKeyframe* newestKeyframe(const TrajectoryMap& t, const StoredKeyfram
   return newest;
 }
 
+/// The session the map is sent around: the robot's current one once placed;
+/// before that its newest placed earlier session (a robot that lost track gets
+/// the map around where it was last placed - its own last keyframes first - and
+/// the packets are in that session's odometry frame); none: nothing to send.
+const TrajectoryMap* placedSession(const GlobalMap& map, const DownlinkRecipient& who) {
+  const auto usable = [](const TrajectoryMap* t) { return t && t->anchored && !t->keyframes.empty(); };
+  if (const TrajectoryMap* t = map.trajectory(who.robot, who.session); usable(t)) return t;
+  const TrajectoryMap* best = nullptr;
+  for (const auto& [tid, t] : map.trajectories)
+    if (t.agent == who.robot && t.session < who.session && usable(&t) && (!best || t.session > best->session))
+      best = &t;
+  return best;
+}
+
 struct Candidate {
   double distance = 0;
   const TrajectoryMap* traj = nullptr;
@@ -190,8 +204,8 @@ std::size_t Downlink::inFlight() const {
 
 std::optional<MapDownPacket> Downlink::select(const GlobalMap& map, const DownlinkRecipient& who,
                                               const Robot& r, std::size_t byte_cap) const {
-  const TrajectoryMap* own = map.trajectory(who.robot, who.session);
-  if (own == nullptr || !own->anchored || own->keyframes.empty()) return std::nullopt;
+  const TrajectoryMap* own = placedSession(map, who);
+  if (own == nullptr) return std::nullopt;
   const StoredKeyframe* prev = nullptr;
   const StoredKeyframe* newest = newestKeyframe(*own, &prev);
   const Vec3 p_r = newest->T_W_C.translation();
@@ -270,7 +284,7 @@ std::optional<MapDownPacket> Downlink::select(const GlobalMap& map, const Downli
 
   // Fill nearest keyframe first with its best landmarks, within the cap.
   MapDownPacket p;
-  p.session = who.session;
+  p.session = own->session;
   p.T_W_O = T_O_W.inverse();
   std::map<std::size_t, std::uint32_t> in_packet;  // w index -> packet index
   std::size_t bytes = kPacketFixedBytes;

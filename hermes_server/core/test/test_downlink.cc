@@ -1,6 +1,6 @@
 // The downlink (downlink.h): what a placed robot gets (others' keyframes and
-// landmarks around it, in its odometry frame), the per-robot byte budget, and
-// exactly-once delivery through loss and an outage.
+// landmarks around it, in its odometry frame), what one that lost track gets,
+// the per-robot byte budget, and exactly-once delivery through loss and an outage.
 #include <gtest/gtest.h>
 
 #include <random>
@@ -132,6 +132,35 @@ TEST(Downlink, SendsOthersKeyframesAroundThePlacedRobotInItsOdometryFrame) {
   DownlinkParams off = params;
   off.enabled = false;
   EXPECT_TRUE(Downlink(off, 1).plan(map, {robot1()}, 0.0).empty());
+}
+
+TEST(Downlink, ARobotThatLostTrackGetsTheMapAroundWhereItWasLastPlaced) {
+  // Robot 1 started session 3 (tracking lost) that no loop has placed yet:
+  // the map around its newest placed session (2) goes, in that session's
+  // frame, its own last keyframes there first.
+  const GlobalMap map = hall();
+  DownlinkParams params;
+  params.max_in_flight = 1;
+  Downlink down(params, 1);
+  const DownlinkRecipient lost{1, uuidFromSeed(1), 3};
+  auto out = down.plan(map, {lost}, 0.0);
+  ASSERT_EQ(out.size(), 1u);
+  auto p = decodeMapDown(out[0].bytes->data(), out[0].bytes->size());
+  ASSERT_TRUE(p.ok()) << p.error();
+  EXPECT_EQ(p->session, 2u) << "the frame of the session last placed";
+  const TrajectoryMap& last = map.trajectories.at({1, 2});
+  const StoredKeyframe& newest = last.keyframes.at(3);
+  EXPECT_LT(((p->T_W_O * newest.keyframe.T_A_C).translation() - newest.T_W_C.translation()).norm(), 1e-9);
+  ASSERT_FALSE(p->keyframes.empty());
+  EXPECT_EQ(p->keyframes.front().origin, (KeyframeKey{1, 2, 3})) << "where it was last: its own newest keyframe";
+  for (const BorrowedKeyframe& k : p->keyframes) {
+    EXPECT_FALSE(k.origin.agent == 1 && k.origin.session == 3);
+    EXPECT_LE((map.keyframe(k.origin)->T_W_C.translation() - newest.T_W_C.translation()).norm(), params.radius_m);
+  }
+  // Any earlier placed session will do (robot 2: only session 1 is in the
+  // map); a robot never placed gets nothing.
+  EXPECT_EQ(down.plan(map, {{2, uuidFromSeed(2), 5}}, 0.0).size(), 1u);
+  EXPECT_TRUE(down.plan(map, {{6, uuidFromSeed(6), 2}}, 0.0).empty());
 }
 
 TEST(Downlink, StaysWithinTheBudgetAndSendsTheNeighbourhoodOnce) {

@@ -5,7 +5,10 @@
 // never its current session's own.
 //
 // Selection. The neighbourhood is every anchored keyframe within radius_m of
-// the robot's newest merged keyframe. Its landmarks are scored with the
+// the robot's newest merged keyframe. A robot whose current session is not
+// placed (it lost track and started a new map) gets the map around its newest
+// placed earlier session, in that session's frame: what it saw last, its own
+// keyframes there first, is what it relocalises against (agent/borrowed_map.h). Its landmarks are scored with the
 // uplink's own scores (distill::computeScores: stability and the future-aware
 // information gain for the robot's predicted poses, from the motion between
 // its two newest keyframes), so what is sent first is what the robot is about
