@@ -238,7 +238,9 @@ TEST(BorrowedMap, RelocalisesWithStereoDepth) {
 
 TEST(BorrowedMap, TooFewMatchesIsAnError) {
   const Scene s = makeScene(4);
-  BorrowedMap map(BorrowedMapParams{});
+  BorrowedMapParams p;
+  p.min_inliers = 25;
+  BorrowedMap map(p);
   ASSERT_EQ(map.ingest(s.packet, s.self), IngestResult::kTaken);
   const Frame f = makeFrame(s, 40, 1, 200, 0, 20);  // 20 true points < min_inliers 25
   const auto r = map.relocalise(f.kps, f.desc, s.K, 0, PoseEstimationParams{});

@@ -55,7 +55,7 @@ struct BorrowedMapParams {
   int max_landmarks = 4000;
   int max_hamming = 50;         ///< accept a descriptor match up to this distance [bits]
   double ratio = 0.8;           ///< best < ratio * second-best distance
-  int min_inliers = 25;         ///< PnP inliers for a relocalisation to count
+  int min_inliers = 12;         ///< PnP inliers for a relocalisation to place the session
   /// With a position guess: only landmarks of borrowed keyframes whose camera
   /// lies within this distance of it are matched [m]; 0 = all landmarks.
   double search_radius_m = 0;
