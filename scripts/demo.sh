@@ -112,7 +112,9 @@ wait_build() {
 }
 
 : >"$BUILD_LOG"
-echo "[demo] set-up and build of the renderer (first time: a few minutes; log $BUILD_LOG)" >&2
+echo "[demo] set-up: the Debian packages of the ROS-free core" >&2
+"$HERMES" setup --core >&2 || exit 1
+echo "[demo] build of the renderer (first time: a few minutes; log $BUILD_LOG)" >&2
 build_target hermes_sim
 while kill -0 "$BUILD_PID" 2>/dev/null; do sleep 1; show_progress "$BUILD_PID" ""; done
 wait_build
