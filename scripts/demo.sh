@@ -103,12 +103,16 @@ show_progress() {  # show_progress <build pid or ""> <render pid or "">
     SHOWN="$line"; SHOWN_AT=$SECONDS
   fi
 }
-build_target() {  # build_target <target>: in the background, into $BUILD_LOG (installs what is missing first)
+build_target() {  # build_target <target>: in the background, into $BUILD_LOG
   "$HERMES" build --no-ros --target "$1" >>"$BUILD_LOG" 2>&1 &
   BUILD_PID=$!
 }
-wait_build() {
-  wait "$BUILD_PID" || { tail -n 30 "$BUILD_LOG" >&2; echo "hermes demo: the build failed (log: $BUILD_LOG)" >&2; exit 1; }
+wait_build() {  # a failed build stops the rendering beside it too
+  wait "$BUILD_PID" && return 0
+  [[ -n "${SIM:-}" ]] && kill "$SIM" 2>/dev/null
+  tail -n 30 "$BUILD_LOG" >&2
+  echo "hermes demo: the build failed (log: $BUILD_LOG)" >&2
+  exit 1
 }
 
 : >"$BUILD_LOG"
